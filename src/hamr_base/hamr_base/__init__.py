@@ -1,0 +1,1 @@
+"""Differential drive with an offset turret (DDROT): HAMR's kinematics."""

@@ -1,0 +1,169 @@
+"""Kinematics of the differential drive with an offset turret (DDROT, HAMR).
+
+Geometry (Costa & Yim, Fig. 5; frames per CONTRACT.md):
+
+* a differential drive with wheel radius ``r`` and half wheel separation ``a``;
+* a turret -- ``base_link``, the payload platform -- whose vertical axis lies
+  ``b`` ahead of the axle midpoint along the drive base's forward axis;
+* joints ``left_wheel_joint``, ``right_wheel_joint`` (positive rolls the wheel
+  forward) and ``turret_joint`` = phi, the turret's angle relative to the drive
+  base (CCW positive, 0 when the drive base faces base_link x).
+
+Derivation. Let the drive base move forward at ``v = r (wL + wR) / 2`` and turn
+at ``wd = r (wR - wL) / (2 a)``. The turret axis is a point of the drive base,
+``b`` ahead of the axle, so it moves at ``v`` along the drive base's forward
+axis ``e`` plus ``b wd`` along ``e_perp``. In base_link the drive base's axes
+are ``e = (cos phi, -sin phi)`` and ``e_perp = (sin phi, cos phi)``, and the
+turret turns at ``wd + phi_dot``::
+
+    vx = v cos(phi) + b wd sin(phi)
+    vy = -v sin(phi) + b wd cos(phi)
+    wz = wd + phi_dot
+
+Relation to the printed eq. 1 of the paper. Its text says "s and c are
+cos(theta_s) and sin(theta_s) respectively"; that is swapped: with s = cos the
+rows do not describe a rigid body (tested). With s = sin(theta_s),
+c = cos(theta_s) eq. 1 is exactly the model above in the paper's own frame:
+its X is lateral to the *right* (= -vy), Y is forward (= vx), Phi is CCW
+(= wz), wheel 1 is the right wheel, wheel 2 the left, and theta_s is the drive
+base's angle relative to the turret (= -phi). ``paper_jacobian`` keeps the
+printed form (with the s/c fix) so that the tests can check this mapping.
+
+The inverse is closed form (the 3x3 Jacobian's determinant is ``r^2 b / (2a)``,
+zero iff b = 0, which is why a DDROT with a centred turret is not holonomic).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import numpy as np
+
+from holonomic_core.kinematics import ESTIMATORS, BaseKinematics
+from holonomic_core.schema import ConfigError, ParamSpec
+
+LEFT_WHEEL = "left_wheel_joint"
+RIGHT_WHEEL = "right_wheel_joint"
+TURRET = "turret_joint"
+
+
+def _positive(name: str, description: str, default=None, maximum=100.0) -> ParamSpec:
+    return ParamSpec(name, "double", description, default=default, minimum=0.0,
+                     exclusive_minimum=True, maximum=maximum)
+
+
+class OffsetTurretKinematics(BaseKinematics):
+    """Exact DDROT kinematics; ``forward`` is the inverse of ``inverse``.
+
+    Its Jacobian is square, so the three estimators all give the exact
+    inverse (there is no redundancy to fit, and no slip to reject).
+    """
+
+    kind = "ddrot"
+
+    def __init__(self, wheel_radius: float, half_wheel_separation: float, turret_offset: float):
+        """``wheel_radius`` r [m] > 0, ``half_wheel_separation`` a [m] > 0,
+        ``turret_offset`` b [m] > 0 (b = 0 makes the base non-holonomic)."""
+        for key, value in (("ddrot.wheel_radius", wheel_radius),
+                           ("ddrot.half_wheel_separation", half_wheel_separation),
+                           ("ddrot.turret_offset", turret_offset)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                extra = (" (b = 0 puts the turret axis on the axle midpoint: the base "
+                         "cannot move sideways, it is not holonomic)"
+                         if key == "ddrot.turret_offset" else "")
+                raise ConfigError(key, value, "a finite number > 0" + extra)
+        self.r = float(wheel_radius)
+        self.a = float(half_wheel_separation)
+        self.b = float(turret_offset)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return (LEFT_WHEEL, RIGHT_WHEEL, TURRET)
+
+    # -- kinematics -----------------------------------------------------------
+    def inverse(self, positions: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """(wL, wR, phi_dot) [rad/s] for body twist (vx, vy, wz) at turret angle phi."""
+        phi = positions[2]
+        s, c = math.sin(phi), math.cos(phi)
+        vx, vy, wz = twist[0], twist[1], twist[2]
+        v = vx * c - vy * s                 # projection on the drive base's forward axis
+        wd = (vx * s + vy * c) / self.b     # the turret axis swings on the lever b
+        return np.array([(v - self.a * wd) / self.r,
+                         (v + self.a * wd) / self.r,
+                         wz - wd])
+
+    def forward(self, positions: np.ndarray, velocities: np.ndarray,
+                estimator: str = "slip_min") -> np.ndarray:
+        """Body twist (vx, vy, wz) from (wL, wR, phi_dot); exact for every estimator."""
+        if estimator not in ESTIMATORS:
+            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
+        phi = positions[2]
+        s, c = math.sin(phi), math.cos(phi)
+        wl, wr, dphi = velocities[0], velocities[1], velocities[2]
+        v = 0.5 * self.r * (wl + wr)
+        wd = 0.5 * self.r * (wr - wl) / self.a
+        return np.array([v * c + self.b * wd * s,
+                         -v * s + self.b * wd * c,
+                         wd + dphi])
+
+    def jacobian(self, positions: np.ndarray) -> np.ndarray:
+        """J_joint_to_base (3x3): twist = J @ (wL, wR, phi_dot)."""
+        phi = positions[2]
+        s, c = math.sin(phi), math.cos(phi)
+        k = 0.5 * self.r / self.a
+        return np.array([[k * (self.a * c - self.b * s), k * (self.a * c + self.b * s), 0.0],
+                         [-k * (self.a * s + self.b * c), k * (self.b * c - self.a * s), 0.0],
+                         [-k, k, 1.0]])
+
+    def paper_jacobian(self, theta_s: float) -> np.ndarray:
+        """Eq. 1 as printed, with s = sin, c = cos (the paper's frame, see module doc).
+
+        Maps (theta_1 = right wheel, theta_2 = left wheel, theta_s) rates to
+        (X lateral right, Y forward, Phi CCW).
+        """
+        r, a, b = self.r, self.a, self.b
+        s, c = math.sin(theta_s), math.cos(theta_s)
+        return np.array([[-r * (b * c + a * s) / (2 * a), r * (b * c - a * s) / (2 * a), 0.0],
+                         [-r * (b * s - a * c) / (2 * a), r * (b * s + a * c) / (2 * a), 0.0],
+                         [r / (2 * a), -r / (2 * a), -1.0]])
+
+    # -- configuration ----------------------------------------------------------
+    @classmethod
+    def param_specs(cls, params: Mapping[str, object]) -> list[ParamSpec]:
+        return [
+            _positive("ddrot.wheel_radius", "Drive wheel radius r [m]."),
+            _positive("ddrot.half_wheel_separation",
+                      "Half the distance between the wheels' contact points, a [m]."),
+            _positive("ddrot.turret_offset",
+                      "Distance b [m] from the axle midpoint forward to the turret axis; "
+                      "must be > 0 for holonomic motion."),
+            # Physical body, read by the simulator's URDF generator (and by
+            # dynamics): masses [kg], lengths [m]. Inertias follow from the
+            # solid shapes.
+            _positive("body.drive_base.mass", "Mass of the drive base [kg].", 14.0, 1e4),
+            _positive("body.drive_base.length",
+                      "Length of the drive base box along its forward axis [m].", 0.40),
+            _positive("body.drive_base.width", "Width of the drive base box [m].", 0.26),
+            _positive("body.drive_base.height", "Height of the drive base box [m].", 0.06),
+            _positive("body.turret.mass", "Mass of the turret with its payload [kg].", 8.0, 1e4),
+            _positive("body.turret.radius", "Radius of the turret disc [m].", 0.30),
+            _positive("body.turret.height", "Thickness of the turret disc [m].", 0.04),
+            _positive("body.wheel.mass", "Mass of one drive wheel [kg].", 0.6, 1e3),
+            _positive("body.wheel.width", "Width of a drive wheel [m].", 0.03),
+            _positive("body.support.radius",
+                      "Radius of the frictionless support balls at the front and back of "
+                      "the drive base (the passive casters) [m].", 0.02),
+        ]
+
+    @classmethod
+    def from_params(cls, values: Mapping[str, object]) -> "OffsetTurretKinematics":
+        kin = cls(values["ddrot.wheel_radius"], values["ddrot.half_wheel_separation"],
+                  values["ddrot.turret_offset"])
+        if values["body.wheel.width"] >= 2 * kin.a:
+            raise ConfigError("body.wheel.width", values["body.wheel.width"],
+                              f"< 2 a = {2 * kin.a:g} m (the wheels would overlap)")
+        if values["body.support.radius"] >= kin.r:
+            raise ConfigError("body.support.radius", values["body.support.radius"],
+                              f"< wheel radius {kin.r:g} m")
+        return kin

@@ -1,0 +1,1 @@
+"""ROS shell of the holonomic base stack: base controller node, bringup, demo."""

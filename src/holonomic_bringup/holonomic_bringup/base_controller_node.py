@@ -1,0 +1,415 @@
+"""The base controller node: a thin ROS shell around holonomic_core.
+
+Parameters -> a validated RobotConfig -> driver + BaseController; messages in
+-> ``BaseController.set_command``; the control loop thread runs
+``BaseController.step`` at ``control_rate`` and publishes odometry, /tf,
+joint states, diagnostics (and, with the simulator, ground truth and /clock)
+from the same thread, decimated to ``publish_rate`` / 1 Hz.
+
+The robot's YAML is named by the ``robot_config`` parameter (a config name or
+a path); every key of it can be overridden with ROS parameters
+(``--ros-args -p cmd_timeout:=1.0`` or ``--params-file``). Without
+``robot_config`` the node takes its whole configuration from the ROS
+parameter overrides (``ros2 run ... --ros-args --params-file config/hamr.yaml``).
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import sys
+import threading
+import time
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import TransformStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry as OdometryMsg
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from std_srvs.srv import SetBool, Trigger
+from tf2_msgs.msg import TFMessage
+
+from holonomic_core.controller import BaseController, ControllerState, config_from_flat
+from holonomic_core.driver import DriverError
+from holonomic_core.loop import ControlLoop
+from holonomic_core.model import read_params_file, resolve_config
+from holonomic_core.schema import ConfigError, ParamSpec
+
+NODE_NAME = "base_controller"
+#: parameters that are not part of the robot config
+_NOT_CONFIG = ("robot_config", "use_sim_time", "start_type_description_service")
+
+_PARAM_TYPES = {
+    "double": ParameterType.PARAMETER_DOUBLE,
+    "int": ParameterType.PARAMETER_INTEGER,
+    "bool": ParameterType.PARAMETER_BOOL,
+    "string": ParameterType.PARAMETER_STRING,
+    "double_array": ParameterType.PARAMETER_DOUBLE_ARRAY,
+    "string_array": ParameterType.PARAMETER_STRING_ARRAY,
+}
+#: twist covariance entries of the planar components (x, y, yaw) in a 6x6
+_PLANAR = (0, 1, 5)
+#: variance of the components a planar base does not move in (z, roll, pitch)
+_PLANAR_LOCKED_VARIANCE = 1e-9
+_SERVICE_TIMEOUT = 2.0  # [s] for the loop to execute a request
+
+
+def descriptor(spec: ParamSpec) -> ParameterDescriptor:
+    """ROS parameter descriptor (type, description, range, read-only) of a spec."""
+    text = spec.description
+    if spec.choices:
+        text += f" One of: {', '.join(spec.choices)}."
+    desc = ParameterDescriptor(name=spec.name, type=_PARAM_TYPES[spec.type],
+                               description=text, read_only=spec.read_only,
+                               additional_constraints=f"allowed: {spec.allowed()}")
+    if spec.minimum is not None and spec.maximum is not None:
+        if spec.type == "double":
+            desc.floating_point_range = [FloatingPointRange(
+                from_value=float(spec.minimum), to_value=float(spec.maximum), step=0.0)]
+        elif spec.type == "int":
+            desc.integer_range = [IntegerRange(
+                from_value=int(spec.minimum), to_value=int(spec.maximum), step=1)]
+    return desc
+
+
+def _stamp(seconds: float) -> TimeMsg:
+    sec = math.floor(seconds)
+    return TimeMsg(sec=int(sec), nanosec=min(int((seconds - sec) * 1e9), 999_999_999))
+
+
+def _yaw_quaternion(msg_orientation, yaw: float) -> None:
+    msg_orientation.x = 0.0
+    msg_orientation.y = 0.0
+    msg_orientation.z = math.sin(0.5 * yaw)
+    msg_orientation.w = math.cos(0.5 * yaw)
+
+
+def _fill_covariance(target, cov3: np.ndarray) -> None:
+    """Write a 3x3 (x, y, yaw) covariance into a 6x6 row-major ROS array."""
+    full = [0.0] * 36
+    for i in (2, 3, 4):
+        full[i * 7] = _PLANAR_LOCKED_VARIANCE
+    for a, ia in enumerate(_PLANAR):
+        for b, ib in enumerate(_PLANAR):
+            full[ia * 6 + ib] = float(cov3[a, b])
+    target[:] = full
+
+
+class BaseControllerNode(Node):
+    """See the module docstring. Raises ConfigError (clean message) on bad config."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self.declare_parameter("robot_config", "", ParameterDescriptor(
+            type=ParameterType.PARAMETER_STRING, read_only=True,
+            description="Robot config: a name from config/ (hamr, xr4000, comr3) or a YAML "
+                        "path. Empty: take the whole configuration from parameter overrides."))
+        self.config = self._load_config()
+        model, ctrl = self.config.model, self.config.controller
+        self._declare_config_parameters()
+
+        # driver + core
+        self.driver = self.config.driver_class(model, self.config.values, ctrl.control_rate)
+        try:
+            self.driver.configure()
+        except DriverError as exc:
+            self.driver.close()
+            raise ConfigError("driver", ctrl.driver, f"a backend that configures ({exc})") from exc
+        self.controller = BaseController(self.config, self.driver)
+        self._sim = self.driver.sim_time() is not None
+        # Simulated time is reported on an epoch = the wall clock at start, so
+        # sim stamps and the stamps of nodes on system time agree while the
+        # simulator runs in real time.
+        self._epoch = time.time() if self._sim else 0.0
+
+        self._odom_frame, self._base_frame = ctrl.odom_frame, ctrl.base_frame
+        self._publish_tf = ctrl.publish_tf
+        self._publish_every = max(1, round(ctrl.control_rate / ctrl.publish_rate))
+        self._clock_every = max(1, round(ctrl.control_rate / 250.0))
+        self._diag_every = max(1, round(ctrl.control_rate))
+        self._cycle = 0
+
+        self._make_interfaces()
+        self.loop = ControlLoop(1.0 / ctrl.control_rate, self._control_cycle,
+                                on_error=self._on_loop_error, name=f"{NODE_NAME}_loop")
+        self._loop_errors = 0
+        if ctrl.enable_on_start:
+            self.controller.request_enable(True)
+        self.loop.start()
+        self.get_logger().info(
+            f"{model.name} ({model.kind}) on driver '{ctrl.driver}' at {ctrl.control_rate:g} Hz; "
+            f"motors {'arming' if ctrl.enable_on_start else 'DISARMED (call ~/enable)'}")
+
+    # -- configuration ------------------------------------------------------------
+    def _load_config(self):
+        source = self.get_parameter("robot_config").value
+        # rclpy has no public accessor for the overrides it parsed from the
+        # command line / params files: _parameter_overrides is that dict.
+        overrides = {name: p.value for name, p in self._parameter_overrides.items()
+                     if name not in _NOT_CONFIG and not name.startswith("qos_overrides.")}
+        if source:
+            path = resolve_config(source)
+            flat = read_params_file(path)
+        else:
+            path, flat = "<parameters>", {}
+        flat.update(overrides)
+        return config_from_flat(flat, str(path))
+
+    def _declare_config_parameters(self) -> None:
+        for spec in self.config.specs:
+            value = self.config.values[spec.name]
+            if isinstance(value, tuple):
+                value = list(value)
+            self.declare_parameter(spec.name, value, descriptor(spec), ignore_override=True)
+
+    # -- ROS interfaces -------------------------------------------------------------
+    def _make_interfaces(self) -> None:
+        ctrl = self.config.controller
+        cmd_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        if ctrl.cmd_vel_stamped:
+            self.create_subscription(TwistStamped, "cmd_vel", self._on_cmd_vel_stamped, cmd_qos)
+        else:
+            self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, cmd_qos)
+        self.odom_pub = self.create_publisher(OdometryMsg, "odom", 10)
+        self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
+        self.joint_pub = self.create_publisher(JointState, "joint_states", 10)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.gt_pub = self.create_publisher(OdometryMsg, "ground_truth/odom", 10) \
+            if self.driver.ground_truth() is not None else None
+        self.clock_pub = self.create_publisher(Clock, "/clock", 10) if self._sim else None
+        self.create_service(Trigger, "~/reset_odometry", self._on_reset_odometry)
+        self.create_service(SetBool, "~/enable", self._on_enable)
+
+        self._odom_msg = OdometryMsg()
+        self._odom_msg.header.frame_id = self._odom_frame
+        self._odom_msg.child_frame_id = self._base_frame
+        self._tf = TransformStamped()
+        self._tf.header.frame_id = self._odom_frame
+        self._tf.child_frame_id = self._base_frame
+        self._joint_msg = JointState()
+        self._joint_msg.name = list(self.config.model.joint_names)
+
+    def _on_cmd_vel(self, msg: Twist) -> None:
+        self._accept((msg.linear.x, msg.linear.y, msg.angular.z), None)
+
+    def _on_cmd_vel_stamped(self, msg: TwistStamped) -> None:
+        twist = msg.twist
+        received = None
+        stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if stamp > 0.0:  # an all-zero stamp means "unstamped": use the arrival time
+            age = self.get_clock().now().nanoseconds * 1e-9 - stamp
+            timeout = self.controller.cmd_timeout
+            if age < -0.1 or (timeout > 0.0 and age > timeout):
+                self.get_logger().warn(
+                    f"cmd_vel stamped {age:+.3f} s from now rejected (allowed: -0.1 s to "
+                    f"cmd_timeout={timeout:g} s old)", throttle_duration_sec=1.0)
+                return
+            received = time.monotonic() - max(age, 0.0)
+        self._accept((twist.linear.x, twist.linear.y, twist.angular.z), received)
+
+    def _accept(self, twist, received) -> None:
+        error = self.controller.set_command(twist, received)
+        if error:
+            self.get_logger().warn(error, throttle_duration_sec=1.0)
+
+    def _wait(self, future):
+        try:
+            return future.result(timeout=_SERVICE_TIMEOUT)
+        except Exception:  # the loop is stopped or stuck
+            return False, "the control loop did not answer within 2 s"
+
+    def _on_enable(self, request, response):
+        response.success, response.message = self._wait(
+            self.controller.request_enable(request.data))
+        self.get_logger().info(f"~/enable {request.data}: {response.message}")
+        return response
+
+    def _on_reset_odometry(self, request, response):
+        response.success, response.message = self._wait(
+            self.controller.request_reset_odometry())
+        return response
+
+    # -- the loop thread ----------------------------------------------------------
+    def _control_cycle(self) -> None:
+        controller = self.controller
+        controller.step()
+        self._loop_errors = 0
+        self._cycle += 1
+        reading = controller.reading
+        if reading is None:
+            if self._cycle % self._diag_every == 0:
+                self._publish_diagnostics()
+            return
+        if self._sim:
+            stamp = _stamp(self._epoch + reading.stamp)
+            if self._cycle % self._clock_every == 0:
+                self.clock_pub.publish(Clock(clock=stamp))
+        else:
+            # map the driver's monotonic stamp onto ROS time
+            now = self.get_clock().now().nanoseconds * 1e-9
+            stamp = _stamp(now - (time.monotonic() - reading.stamp))
+        if self._cycle % self._publish_every == 0:
+            self._publish_state(stamp, reading)
+        if self._cycle % self._diag_every == 0:
+            self._publish_diagnostics()
+
+    def _publish_state(self, stamp: TimeMsg, reading) -> None:
+        odo = self.controller.odometry
+        x, y, yaw = (float(v) for v in odo.pose)
+        msg = self._odom_msg
+        msg.header.stamp = stamp
+        msg.pose.pose.position.x = x
+        msg.pose.pose.position.y = y
+        _yaw_quaternion(msg.pose.pose.orientation, yaw)
+        _fill_covariance(msg.pose.covariance, odo.pose_covariance)
+        msg.twist.twist.linear.x = float(odo.twist[0])
+        msg.twist.twist.linear.y = float(odo.twist[1])
+        msg.twist.twist.angular.z = float(odo.twist[2])
+        _fill_covariance(msg.twist.covariance, odo.twist_covariance)
+        self.odom_pub.publish(msg)
+        if self._publish_tf:
+            tf = self._tf
+            tf.header.stamp = stamp
+            tf.transform.translation.x = x
+            tf.transform.translation.y = y
+            _yaw_quaternion(tf.transform.rotation, yaw)
+            self.tf_pub.publish(TFMessage(transforms=[tf]))
+        joints = self._joint_msg
+        joints.header.stamp = stamp
+        joints.position = reading.positions.tolist()
+        joints.velocity = reading.velocities.tolist()
+        joints.effort = [] if np.all(np.isnan(reading.efforts)) else reading.efforts.tolist()
+        self.joint_pub.publish(joints)
+        if self.gt_pub is not None:
+            self._publish_ground_truth(stamp)
+
+    def _publish_ground_truth(self, stamp: TimeMsg) -> None:
+        truth = self.driver.ground_truth()
+        if truth is None:
+            return
+        msg = OdometryMsg()
+        msg.header.stamp = stamp
+        msg.header.frame_id = self._odom_frame
+        msg.child_frame_id = self._base_frame
+        msg.pose.pose.position.x = float(truth.pose[0])
+        msg.pose.pose.position.y = float(truth.pose[1])
+        _yaw_quaternion(msg.pose.pose.orientation, float(truth.pose[2]))
+        msg.twist.twist.linear.x = float(truth.twist[0])
+        msg.twist.twist.linear.y = float(truth.twist[1])
+        msg.twist.twist.angular.z = float(truth.twist[2])
+        self.gt_pub.publish(msg)
+
+    def _publish_diagnostics(self) -> None:
+        c = self.controller
+        robot = self.config.model.name
+        state = c.state
+        now = self.get_clock().now().to_msg()
+        level_driver = DiagnosticStatus.ERROR if state is ControllerState.FAULT else DiagnosticStatus.OK
+        driver_values = dict(self.driver.status())
+        driver_values["controller_state"] = state.value
+        if c.fault:
+            driver_values["fault"] = c.fault
+        loop = self.loop.stats.summary()
+        period_ms = 1e3 / self.config.controller.control_rate
+        loop_level = DiagnosticStatus.OK if loop["period_p99_ms"] <= 2.0 * period_ms \
+            else DiagnosticStatus.WARN
+        age = c.command_age()
+        cmd_values = {
+            "command_age_s": f"{age:.3f}" if math.isfinite(age) else "none",
+            "stale": str(c.stale), "timeouts": str(c.counters["timeouts"]),
+            "rejected_commands": str(c.counters["rejected_commands"]),
+            "saturation_scale": f"{c.saturation:.3f}",
+            "twist_command": " ".join(f"{v:.3f}" for v in c.twist_command),
+        }
+        odo = c.odometry
+        odo_values = {"estimator": odo.estimator, "distance_m": f"{odo.distance:.3f}"}
+        for name, value in zip(self._unit_names(), odo.residual):
+            odo_values[f"slip_residual_{name}_m_s"] = f"{value:.4f}"
+        statuses = [
+            self._status(f"{NODE_NAME}: driver", level_driver,
+                         c.fault or f"{self.config.controller.driver} {state.value}", driver_values),
+            self._status(f"{NODE_NAME}: control loop", loop_level,
+                         f"{loop['rate_hz']:.1f} Hz, p99 period {loop['period_p99_ms']:.2f} ms",
+                         {k: f"{v:.3f}" if isinstance(v, float) else str(v) for k, v in loop.items()}),
+            self._status(f"{NODE_NAME}: command", DiagnosticStatus.OK,
+                         "stale: stopping" if c.stale else "tracking", cmd_values),
+            self._status(f"{NODE_NAME}: odometry", DiagnosticStatus.OK,
+                         f"{odo.estimator}, {odo.distance:.2f} m", odo_values),
+        ]
+        for status in statuses:
+            status.hardware_id = robot
+        self.diag_pub.publish(DiagnosticArray(header=Header(stamp=now), status=statuses))
+
+    def _unit_names(self):
+        kin = self.config.model.kinematics
+        return getattr(kin, "caster_names", ())
+
+    @staticmethod
+    def _status(name, level, message, values) -> DiagnosticStatus:
+        return DiagnosticStatus(level=level, name=name, message=message,
+                                values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+    def _on_loop_error(self, exc: BaseException) -> bool:
+        """An unexpected exception in the cycle: stop the motors, keep the loop.
+
+        After 50 consecutive failures the loop stops; the motors stay off.
+        """
+        self._loop_errors += 1
+        self.get_logger().error(f"control cycle failed: {exc!r}; stopping the motors",
+                                throttle_duration_sec=1.0)
+        try:
+            self.driver.deactivate()
+        except DriverError:
+            pass
+        self.controller.fault = f"internal error: {exc!r}"
+        return self._loop_errors < 50
+
+    def shutdown(self) -> None:
+        """Stop the loop, stop and disarm the motors, close the driver."""
+        self.loop.stop()
+        self.controller.shutdown()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the node until SIGINT/SIGTERM; exit 0 after stopping the motors.
+
+    Exit 2 with a one-line message on an invalid configuration.
+    """
+    argv = sys.argv if argv is None else argv
+    # Our own signal handling: rclpy's would shut the context down before we
+    # have stopped the motors.
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    try:
+        node = BaseControllerNode()
+    except ConfigError as exc:
+        print(f"{NODE_NAME}: configuration error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        node.shutdown()
+        node.get_logger().info("motors stopped and disarmed; exiting")
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,78 @@
+"""``holonomic-bringup ROBOT``: start the whole stack for one robot.
+
+A pure-Python launcher (``ros2 launch`` is not available from PyPI): it
+validates the configuration, sets a safe DDS discovery default and runs the
+base controller node -- which owns the driver, so with ``--driver sim`` the
+pybullet stand-in runs inside it -- until SIGINT/SIGTERM, then stops and
+disarms the motors and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from holonomic_core.driver import DRIVER_REGISTRY
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="holonomic-bringup",
+        description="Start the base controller, its driver (simulator or motor drives) "
+                    "and its topics for one robot. Motors start disarmed unless --enable.")
+    parser.add_argument("robot", help="a config name from config/ (hamr, xr4000, comr3) "
+                                      "or a path to a robot YAML")
+    parser.add_argument("--driver", choices=sorted(DRIVER_REGISTRY),
+                        help="driver backend (default: the config's `driver`, normally sim)")
+    parser.add_argument("--gui", action="store_true", help="show the pybullet GUI (sim only)")
+    parser.add_argument("--namespace", default="", help="ROS namespace of the robot's "
+                                                        "node and topics")
+    parser.add_argument("--params-file", action="append", default=[], metavar="FILE",
+                        help="extra ROS 2 params file(s) overriding the robot config")
+    parser.add_argument("--enable", action="store_true",
+                        help="arm the motors at start (default: disarmed until ~/enable)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override one parameter, e.g. -p cmd_timeout:=1.0")
+    return parser.parse_args(argv)
+
+
+def ros_arguments(args: argparse.Namespace) -> list[str]:
+    """The ``--ros-args`` for the base controller node."""
+    from holonomic_core.model import resolve_config
+
+    ros = ["--ros-args", "-p", f"robot_config:={resolve_config(args.robot)}"]
+    if args.namespace:
+        ns = args.namespace if args.namespace.startswith("/") else "/" + args.namespace
+        ros += ["-r", f"__ns:={ns}"]
+    if args.driver:
+        ros += ["-p", f"driver:={args.driver}"]
+    if args.gui:
+        ros += ["-p", "sim.gui:=true"]
+    if args.enable:
+        ros += ["-p", "enable_on_start:=true"]
+    for path in args.params_file:
+        ros += ["--params-file", path]
+    for item in args.param:
+        if ":=" not in item:
+            raise SystemExit(f"holonomic-bringup: -p expects NAME:=VALUE, got {item!r}")
+        ros += ["-p", item]
+    return ros
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    # DDS must not multicast on the network interface unless the user asks for it.
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    from holonomic_core.schema import ConfigError
+    try:
+        ros = ros_arguments(args)
+    except ConfigError as exc:
+        print(f"holonomic-bringup: {exc}", file=sys.stderr)
+        return 2
+    from holonomic_bringup.base_controller_node import main as node_main
+    return node_main(["holonomic-bringup"] + ros)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

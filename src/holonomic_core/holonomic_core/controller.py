@@ -1,0 +1,379 @@
+"""The base controller's core: one control cycle, ROS-free.
+
+Each :meth:`BaseController.step` (called by the fixed-rate loop thread):
+
+1. applies pending requests (arm, disarm, reset odometry) -- driver calls
+   only ever happen in the loop thread;
+2. reads the driver and integrates odometry;
+3. picks the target twist: the latest command, or zero when disarmed, when
+   the command is stale (older than ``cmd_timeout``) or when it was
+   rejected as non-finite;
+4. limits it (speed, acceleration, deceleration: direction-preserving),
+   maps it through the exact inverse kinematics at the measured joint
+   positions, scales the joint rates uniformly to their speed limits, and
+   writes them.
+
+ROS callbacks only call :meth:`set_command` and the ``request_*`` methods,
+which store a value and return; they never touch the driver.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import enum
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from holonomic_core.driver import (DRIVER_REGISTRY, Driver, DriverError, DriverState,
+                                   JointReading, driver_class)
+from holonomic_core.kinematics import ESTIMATORS
+from holonomic_core.limits import TwistLimiter, is_finite_twist, saturate_joint_rates
+from holonomic_core.model import (RobotModel, build_model, check_no_unknown, read_params_file,
+                                  resolve_config)
+from holonomic_core.odometry import Odometry, OdometryNoise
+from holonomic_core.schema import ConfigError, ParamSpec, validate
+
+_AXES = (("linear.x", "m/s", "m/s^2"), ("linear.y", "m/s", "m/s^2"),
+         ("angular.z", "rad/s", "rad/s^2"))
+
+
+def _limit_specs() -> list[ParamSpec]:
+    specs = []
+    for axis, vel_unit, acc_unit in _AXES:
+        specs += [
+            ParamSpec(f"limits.{axis}.max_velocity", "double",
+                      f"Speed limit of the commanded twist's {axis} [{vel_unit}].",
+                      minimum=0.0, exclusive_minimum=True, maximum=100.0),
+            ParamSpec(f"limits.{axis}.max_acceleration", "double",
+                      f"Acceleration limit on {axis} when speeding up [{acc_unit}].",
+                      minimum=0.0, exclusive_minimum=True, maximum=1000.0),
+            ParamSpec(f"limits.{axis}.max_deceleration", "double",
+                      f"Deceleration limit on {axis} when slowing down or stopping "
+                      f"(also after a command timeout) [{acc_unit}].",
+                      minimum=0.0, exclusive_minimum=True, maximum=1000.0),
+        ]
+    return specs
+
+
+CONTROLLER_SPECS: list[ParamSpec] = [
+    ParamSpec("driver", "string", "Driver backend: " + ", ".join(sorted(DRIVER_REGISTRY)) + ".",
+              default="sim", choices=tuple(sorted(DRIVER_REGISTRY))),
+    ParamSpec("control_rate", "double", "Rate of the control loop [Hz].",
+              default=200.0, minimum=1.0, maximum=1000.0),
+    ParamSpec("publish_rate", "double",
+              "Rate of odom, /tf and joint_states [Hz]; at most control_rate.",
+              default=50.0, minimum=0.1, maximum=1000.0),
+    ParamSpec("cmd_timeout", "double",
+              "Age [s] after which the last cmd_vel is stale and the base stops "
+              "under the deceleration limits; 0 disables the timeout.",
+              default=0.5, minimum=0.0, maximum=60.0),
+    ParamSpec("estimator", "string",
+              "Odometry estimator: slip_min (C# = Cp+ Cq^-1), pinv or robust.",
+              default="slip_min", choices=ESTIMATORS),
+    ParamSpec("odom_frame", "string", "Frame of the odometry (REP 105).", default="odom"),
+    ParamSpec("base_frame", "string", "Frame of the base (REP 105).", default="base_link"),
+    ParamSpec("publish_tf", "bool", "Publish odom -> base_link on /tf.", default=True),
+    ParamSpec("cmd_vel_stamped", "bool",
+              "Subscribe cmd_vel as geometry_msgs/TwistStamped instead of Twist.", default=False),
+    ParamSpec("enable_on_start", "bool",
+              "Arm the motors at start. Default false: motors start disarmed and "
+              "~/enable arms them.", default=False),
+    ParamSpec("odometry.linear_variance_per_meter", "double",
+              "Position variance added per metre travelled [m^2/m].",
+              default=4e-4, minimum=0.0, maximum=1.0),
+    ParamSpec("odometry.angular_variance_per_radian", "double",
+              "Heading variance added per radian turned [rad^2/rad].",
+              default=1e-3, minimum=0.0, maximum=1.0),
+    ParamSpec("odometry.angular_variance_per_meter", "double",
+              "Heading variance added per metre travelled [rad^2/m].",
+              default=4e-4, minimum=0.0, maximum=1.0),
+    ParamSpec("odometry.twist_variance", "double_array",
+              "Variances of the reported twist (vx, vy, wz) [(m/s)^2, (m/s)^2, (rad/s)^2].",
+              default=(4e-4, 4e-4, 1e-3), minimum=0.0, maximum=100.0, min_length=3),
+] + _limit_specs()
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Validated settings of the base controller (units in CONTROLLER_SPECS)."""
+
+    driver: str
+    control_rate: float
+    publish_rate: float
+    cmd_timeout: float
+    estimator: str
+    odom_frame: str
+    base_frame: str
+    publish_tf: bool
+    cmd_vel_stamped: bool
+    enable_on_start: bool
+    max_velocity: tuple[float, float, float]
+    max_acceleration: tuple[float, float, float]
+    max_deceleration: tuple[float, float, float]
+    noise: OdometryNoise
+
+    @classmethod
+    def from_values(cls, v: Mapping[str, Any]) -> "ControllerConfig":
+        if v["publish_rate"] > v["control_rate"]:
+            raise ConfigError("publish_rate", v["publish_rate"],
+                              f"<= control_rate ({v['control_rate']:g} Hz)")
+        if len(v["odometry.twist_variance"]) != 3:
+            raise ConfigError("odometry.twist_variance", v["odometry.twist_variance"],
+                              "exactly 3 variances (vx, vy, wz)")
+        axes = [a for a, _, _ in _AXES]
+        return cls(
+            driver=v["driver"], control_rate=v["control_rate"], publish_rate=v["publish_rate"],
+            cmd_timeout=v["cmd_timeout"], estimator=v["estimator"],
+            odom_frame=v["odom_frame"], base_frame=v["base_frame"],
+            publish_tf=v["publish_tf"], cmd_vel_stamped=v["cmd_vel_stamped"],
+            enable_on_start=v["enable_on_start"],
+            max_velocity=tuple(v[f"limits.{a}.max_velocity"] for a in axes),
+            max_acceleration=tuple(v[f"limits.{a}.max_acceleration"] for a in axes),
+            max_deceleration=tuple(v[f"limits.{a}.max_deceleration"] for a in axes),
+            noise=OdometryNoise(v["odometry.linear_variance_per_meter"],
+                                v["odometry.angular_variance_per_radian"],
+                                v["odometry.angular_variance_per_meter"],
+                                tuple(v["odometry.twist_variance"])),
+        )
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """Everything needed to run one robot, validated.
+
+    ``specs``: every parameter's schema (the ROS node declares them);
+    ``values``: every validated value by flat key.
+    """
+
+    model: RobotModel
+    controller: ControllerConfig
+    driver_class: type
+    specs: tuple[ParamSpec, ...]
+    values: Mapping[str, Any] = field(repr=False)
+    source: str = ""
+
+
+def config_from_flat(flat: Mapping[str, Any], source: str = "") -> RobotConfig:
+    """Validate a flat parameter dict (file + overrides) into a RobotConfig."""
+    model, model_specs = build_model(flat)
+    values = dict(model.params)
+    values.update(validate(CONTROLLER_SPECS, flat))
+    controller = ControllerConfig.from_values(values)
+    dcls = driver_class(controller.driver)
+    dspecs = dcls.param_specs(model)
+    values.update(validate(dspecs, flat))
+    # Keys of the backends not in use (e.g. `sim.*` on a real robot) are
+    # allowed in the file; anything else unknown is a typo.
+    others = tuple(f"{name}." for name in DRIVER_REGISTRY if name != controller.driver)
+    specs = tuple(model_specs + CONTROLLER_SPECS + dspecs)
+    check_no_unknown(list(specs), flat, ignore_prefixes=others)
+    return RobotConfig(model, controller, dcls, specs, values, source)
+
+
+def load_config(source, overrides: Mapping[str, Any] | None = None) -> RobotConfig:
+    """Load and validate a robot config (a name from config/ or a YAML path).
+
+    ``overrides``: flat keys applied over the file (e.g. ``{"driver": "mock"}``).
+    Raises :class:`ConfigError` naming the first bad key.
+    """
+    path = resolve_config(source)
+    flat = read_params_file(path)
+    flat.update(overrides or {})
+    return config_from_flat(flat, str(path))
+
+
+class ControllerState(enum.Enum):
+    DISARMED = "disarmed"
+    ARMED = "armed"
+    FAULT = "fault"
+
+
+_ZERO3 = np.zeros(3)
+
+
+class BaseController:
+    """One robot's control cycle: driver in, odometry and joint commands out.
+
+    ``clock`` [s] (monotonic) times command age; injectable for tests.
+    Thread-safety: :meth:`set_command` and the ``request_*`` methods may be
+    called from any thread; :meth:`step` from the loop thread only.
+    """
+
+    def __init__(self, config: RobotConfig, driver: Driver,
+                 clock: Callable[[], float] = time.monotonic):
+        self.config = config
+        self.model = config.model
+        c = config.controller
+        self.driver = driver
+        self.dt = 1.0 / c.control_rate
+        self.cmd_timeout = c.cmd_timeout
+        self.limiter = TwistLimiter(c.max_velocity, c.max_acceleration, c.max_deceleration)
+        self.odometry = Odometry(self.model, c.estimator, c.noise)
+        self._clock = clock
+        self._max_rates = self.model.max_joint_velocity
+        n = len(self.model.joint_names)
+        # (twist, receive time); replaced atomically by set_command
+        self._command: tuple[np.ndarray, float] | None = None
+        self._requests: list[tuple[str, Any, concurrent.futures.Future]] = []
+        self._requests_lock = threading.Lock()
+        # outputs of the last cycle, read by the ROS shell in the loop thread
+        self.reading: JointReading | None = None
+        self.twist_command = np.zeros(3)
+        self.joint_command = np.zeros(n)
+        self.saturation = 1.0
+        self.stale = True
+        self.fault: str | None = None
+        self.counters = {"rejected_commands": 0, "timeouts": 0, "driver_errors": 0,
+                         "cycles": 0}
+
+    # -- inputs (any thread) -------------------------------------------------------
+    def set_command(self, twist, received: float | None = None) -> str | None:
+        """Store the latest command (vx, vy, wz) [m/s, m/s, rad/s] in base_link.
+
+        A non-finite component rejects the command *and* stops the base (the
+        publisher is broken; its last good command is not trusted either).
+        Returns None when accepted, else the reason it was rejected.
+        """
+        now = self._clock() if received is None else received
+        try:
+            values = np.array([float(twist[0]), float(twist[1]), float(twist[2])])
+        except (TypeError, ValueError, IndexError):
+            values = None
+        if values is None or not is_finite_twist(values):
+            self.counters["rejected_commands"] += 1
+            self._command = (_ZERO3, now)
+            return f"non-finite command {tuple(twist)!r} rejected; stopping the base"
+        self._command = (values, now)
+        return None
+
+    def request_enable(self, enable: bool) -> concurrent.futures.Future:
+        """Ask the loop to arm (True) or disarm (False) the motors.
+
+        The future resolves to ``(success, message)`` after the next cycle.
+        """
+        return self._request("enable", bool(enable))
+
+    def request_reset_odometry(self) -> concurrent.futures.Future:
+        """Ask the loop to reset the odometry pose to the origin."""
+        return self._request("reset_odometry", None)
+
+    def _request(self, kind: str, arg: Any) -> concurrent.futures.Future:
+        future: concurrent.futures.Future = concurrent.futures.Future()
+        with self._requests_lock:
+            self._requests.append((kind, arg, future))
+        return future
+
+    # -- state ------------------------------------------------------------------
+    @property
+    def state(self) -> ControllerState:
+        if self.fault is not None:
+            return ControllerState.FAULT
+        return ControllerState.ARMED if self.driver.armed else ControllerState.DISARMED
+
+    def command_age(self) -> float:
+        """Seconds since the last command (inf if none)."""
+        cmd = self._command
+        return math.inf if cmd is None else self._clock() - cmd[1]
+
+    # -- the cycle (loop thread) ----------------------------------------------------
+    def step(self) -> bool:
+        """Run one control cycle. Returns False if the driver failed this cycle."""
+        self.counters["cycles"] += 1
+        self._process_requests()
+        try:
+            reading = self.driver.read()
+        except DriverError as exc:
+            self._on_fault(exc)
+            return False
+        self.reading = reading
+        self.odometry.update(reading.positions, reading.stamp)
+
+        if not self.driver.armed:
+            self.twist_command[:] = 0.0
+            self.joint_command[:] = 0.0
+            self.saturation = 1.0
+            return True
+
+        target = self._target()
+        twist = self.limiter.limit(target, self.twist_command, self.dt)
+        rates = self.model.kinematics.inverse(reading.positions, twist)
+        rates, scale = saturate_joint_rates(rates, self._max_rates)
+        try:
+            self.driver.write_velocities(rates)
+        except DriverError as exc:
+            self._on_fault(exc)
+            return False
+        # The limiter continues from what was really commanded.
+        self.twist_command = twist * scale if scale < 1.0 else twist
+        self.joint_command = rates
+        self.saturation = scale
+        return True
+
+    def _target(self) -> np.ndarray:
+        cmd = self._command
+        if cmd is None:
+            self.stale = True
+            return _ZERO3
+        twist, received = cmd
+        stale = self.cmd_timeout > 0.0 and self._clock() - received > self.cmd_timeout
+        if stale and not self.stale:
+            self.counters["timeouts"] += 1
+        self.stale = stale
+        return _ZERO3 if stale else twist
+
+    def _process_requests(self) -> None:
+        if not self._requests:
+            return
+        with self._requests_lock:
+            pending, self._requests = self._requests, []
+        for kind, arg, future in pending:
+            try:
+                if kind == "enable":
+                    result = self._arm() if arg else self._disarm()
+                else:
+                    self.odometry.reset()
+                    result = (True, "odometry reset to the origin")
+            except DriverError as exc:
+                self._on_fault(exc)
+                result = (False, f"driver error: {exc}")
+            future.set_result(result)
+
+    def _arm(self) -> tuple[bool, str]:
+        if self.driver.armed:
+            return True, "already armed"
+        # A fault is cleared only if the driver answers again.
+        self.driver.read()
+        self.fault = None
+        if self.driver.state is DriverState.INACTIVE:
+            self.driver.activate()
+        # Start from rest and ignore commands sent before arming.
+        self._command = None
+        self.twist_command = np.zeros(3)
+        return True, "motors armed"
+
+    def _disarm(self) -> tuple[bool, str]:
+        self.driver.deactivate()
+        self.twist_command = np.zeros(3)
+        return True, "motors disarmed"
+
+    def _on_fault(self, exc: DriverError) -> None:
+        self.counters["driver_errors"] += 1
+        self.fault = str(exc)
+        self.twist_command = np.zeros(3)
+        self.joint_command[:] = 0.0
+        try:
+            self.driver.deactivate()
+        except DriverError:
+            pass  # already reported: the fault itself
+
+    def shutdown(self) -> None:
+        """Stop and disarm the motors, then close the driver (any thread, loop stopped)."""
+        try:
+            self.driver.deactivate()
+        finally:
+            self.driver.close()

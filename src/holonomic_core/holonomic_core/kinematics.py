@@ -1,0 +1,104 @@
+"""The kinematics protocol every base family implements, and their registry.
+
+A base's kinematics map joint rates to the planar body twist of ``base_link``
+and back. Conventions (REP 103, ``shared/CONTRACT.md``):
+
+* twist: ``(vx, vy, wz)`` in ``base_link`` -- m/s, m/s, rad/s;
+* joint positions / rates: arrays in :attr:`BaseKinematics.joint_names` order,
+  rad and rad/s.
+
+A kinematics object is immutable geometry (pinocchio's *Model*): the changing
+state (joint positions, odometry) lives in the caller.
+"""
+
+from __future__ import annotations
+
+import abc
+import importlib
+from typing import Mapping
+
+import numpy as np
+
+from holonomic_core.schema import ConfigError, ParamSpec
+
+#: The estimators ``forward`` understands (see CONTRACT.md, Python API).
+ESTIMATORS = ("slip_min", "pinv", "robust")
+
+
+class BaseKinematics(abc.ABC):
+    """Geometry of one base family; pure functions of (positions, rates)."""
+
+    #: registry name used in the YAML (``robot.kinematics``)
+    kind: str = ""
+
+    @property
+    @abc.abstractmethod
+    def joint_names(self) -> tuple[str, ...]:
+        """All actuated joints, in the order of every joint array."""
+
+    @abc.abstractmethod
+    def inverse(self, positions: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """Joint rates [rad/s] that realise ``twist`` (base_link) at ``positions``."""
+
+    @abc.abstractmethod
+    def forward(
+        self,
+        positions: np.ndarray,
+        velocities: np.ndarray,
+        estimator: str = "slip_min",
+    ) -> np.ndarray:
+        """Body twist ``(vx, vy, wz)`` in base_link estimated from joint rates."""
+
+    @abc.abstractmethod
+    def jacobian(self, positions: np.ndarray) -> np.ndarray:
+        """``J_joint_to_base`` (3 x n): twist = J @ rates for a rigid, no-slip base.
+
+        For bases with more joints than DOF (the PCV) this is the estimator
+        ``C#`` of the default estimator; for the DDROT it is the exact inverse
+        of the square inverse-kinematics matrix.
+        """
+
+    def fit_residual(self, positions: np.ndarray, velocities: np.ndarray,
+                     estimator: str = "slip_min") -> np.ndarray:
+        """Per-wheel-unit slip the estimator could not explain.
+
+        Returns an array (one entry per wheel unit, m/s) of the norm of the
+        contact-velocity residual. A square (exactly determined) base has
+        nothing to explain away, so the default is empty.
+        """
+        return np.zeros(0)
+
+    @classmethod
+    @abc.abstractmethod
+    def param_specs(cls, params: Mapping[str, object]) -> list[ParamSpec]:
+        """Schema of this family's YAML keys (may depend on e.g. caster names)."""
+
+    @classmethod
+    @abc.abstractmethod
+    def from_params(cls, params: Mapping[str, object]) -> "BaseKinematics":
+        """Build from validated flat parameters; raise :class:`ConfigError`."""
+
+
+#: name -> "module:Class", imported lazily so that a DDROT user needs no
+#: PCV code and the core package imports none of the families.
+KINEMATICS_REGISTRY: dict[str, str] = {
+    "ddrot": "hamr_base.offset_turret:OffsetTurretKinematics",
+    "pcv": "pcv_base.powered_caster:PoweredCasterKinematics",
+}
+
+
+def kinematics_class(kind: str) -> type[BaseKinematics]:
+    """Resolve a ``robot.kinematics`` value to its class."""
+    try:
+        target = KINEMATICS_REGISTRY[kind]
+    except KeyError:
+        raise ConfigError(
+            "robot.kinematics", kind,
+            f"one of {sorted(KINEMATICS_REGISTRY)}") from None
+    module_name, _, class_name = target.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:  # package missing from the environment
+        raise ConfigError("robot.kinematics", kind,
+                          f"an installed family ({module_name}: {exc})") from exc
+    return getattr(module, class_name)

@@ -1,0 +1,113 @@
+"""A fixed-rate loop in its own thread, paced by absolute deadlines.
+
+rclpy timers drop missed ticks and jitter by milliseconds under load
+(ENVIRONMENT.md); a thread that sleeps to absolute deadlines ``t0 + k T``
+(and busy-waits the last ``spin`` seconds) holds 1 kHz. If a cycle overruns
+by more than a whole period the loop does not try to catch up with a burst
+of cycles: it counts the miss and re-anchors its deadlines to now.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable
+
+import numpy as np
+
+
+class LoopStats:
+    """Period and compute-time statistics over the last ``window`` cycles [s]."""
+
+    def __init__(self, window: int = 2000):
+        self.periods = np.zeros(window)
+        self.compute = np.zeros(window)
+        self.count = 0
+        self.overruns = 0
+        self.max_period = 0.0
+
+    def add(self, period: float, compute: float) -> None:
+        i = self.count % self.periods.size
+        self.periods[i] = period
+        self.compute[i] = compute
+        self.count += 1
+        if period > self.max_period:
+            self.max_period = period
+
+    def summary(self) -> dict[str, float]:
+        """rate [Hz], period p50/p99/max and compute p99 [ms], overruns."""
+        n = min(self.count, self.periods.size)
+        if n == 0:
+            return {"rate_hz": 0.0, "period_p50_ms": 0.0, "period_p99_ms": 0.0,
+                    "period_max_ms": 0.0, "compute_p99_ms": 0.0, "overruns": 0}
+        periods = self.periods[:n]
+        mean = float(np.mean(periods))
+        return {"rate_hz": 1.0 / mean if mean > 0 else 0.0,
+                "period_p50_ms": 1e3 * float(np.percentile(periods, 50)),
+                "period_p99_ms": 1e3 * float(np.percentile(periods, 99)),
+                "period_max_ms": 1e3 * self.max_period,
+                "compute_p99_ms": 1e3 * float(np.percentile(self.compute[:n], 99)),
+                "overruns": self.overruns}
+
+
+class ControlLoop:
+    """Calls ``step()`` every ``period`` seconds in a daemon thread.
+
+    ``on_error(exc)`` is called with any exception ``step`` raises; the loop
+    keeps running unless it returns False (then the loop stops). ``spin``
+    [s]: how long before each deadline to stop sleeping and busy-wait.
+    """
+
+    def __init__(self, period: float, step: Callable[[], object],
+                 on_error: Callable[[BaseException], bool] | None = None,
+                 spin: float = 2e-4, name: str = "control_loop"):
+        if not period > 0:
+            raise ValueError(f"loop period must be > 0 s, got {period}")
+        self.period = float(period)
+        self._step = step
+        self._on_error = on_error
+        self._spin = min(spin, 0.2 * period)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self.stats = LoopStats()
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> bool:
+        """Stop the loop; returns True if the thread ended within ``timeout``."""
+        self._stop.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout)
+        return not self._thread.is_alive()
+
+    @property
+    def running(self) -> bool:
+        return self._thread.is_alive()
+
+    def _run(self) -> None:
+        clock = time.perf_counter
+        deadline = clock()
+        last: float | None = None
+        while not self._stop.is_set():
+            start = clock()
+            try:
+                self._step()
+            except Exception as exc:  # keep the loop alive; the owner decides
+                if self._on_error is None or not self._on_error(exc):
+                    break
+            end = clock()
+            if last is not None:
+                self.stats.add(start - last, end - start)
+            last = start
+            deadline += self.period
+            if end - deadline > self.period:
+                self.stats.overruns += 1
+                deadline = end  # re-anchor: no burst of catch-up cycles
+                continue
+            remaining = deadline - clock() - self._spin
+            if remaining > 0:
+                if self._stop.wait(remaining):
+                    break
+            while clock() < deadline:
+                pass

@@ -1,0 +1,208 @@
+"""Robot model and configuration, loaded once from a YAML params file.
+
+``load_model("hamr")`` returns an immutable :class:`RobotModel` (geometry and
+joint limits, pinocchio's *Model*); ``load_config`` returns everything a base
+controller needs (model, controller settings, driver choice and parameters).
+
+A config file is a valid ROS 2 params file::
+
+    base_controller:
+      ros__parameters:
+        robot: {name: hamr, kinematics: ddrot}
+        ddrot: {wheel_radius: 0.0615, ...}
+
+Nested keys are flattened to dotted names (``ddrot.wheel_radius``) exactly as
+ROS 2 does, and every key is validated against the schema of
+:mod:`holonomic_core.schema` -- the same schema the ROS node declares.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Mapping
+
+import numpy as np
+import yaml
+
+from holonomic_core.kinematics import BaseKinematics, kinematics_class
+from holonomic_core.schema import ConfigError, ParamSpec, flatten, unknown_keys, validate
+
+#: the node name under which config files hold their parameters
+NODE_NAME = "base_controller"
+
+ROBOT_SPECS = [
+    ParamSpec("robot.name", "string", "Robot name, used in diagnostics and logs."),
+    ParamSpec("robot.kinematics", "string",
+              "Kinematic family: 'ddrot' (differential drive with offset turret) "
+              "or 'pcv' (powered-caster vehicle).", choices=("ddrot", "pcv")),
+]
+
+
+def joint_specs(joint: str) -> list[ParamSpec]:
+    """Schema of the per-joint keys ``joints.<joint>.*``."""
+    return [
+        ParamSpec(f"joints.{joint}.max_velocity", "double",
+                  f"Speed limit of {joint} [rad/s]; commands are scaled to respect it.",
+                  minimum=0.0, exclusive_minimum=True, maximum=1e4),
+        ParamSpec(f"joints.{joint}.max_effort", "double",
+                  f"Torque limit of {joint} [N m] (motor model of the simulator, "
+                  "current limit of a real drive).",
+                  default=10.0, minimum=0.0, exclusive_minimum=True, maximum=1e5),
+    ]
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Limits of one joint: speed [rad/s] and effort [N m]."""
+
+    max_velocity: float
+    max_effort: float
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """Immutable geometry, joint limits and physical parameters of one robot."""
+
+    name: str
+    kinematics: BaseKinematics
+    joint_limits: tuple[JointLimits, ...]
+    #: every validated parameter (read-only), for the simulator's URDF and tools
+    params: Mapping[str, Any]
+
+    @property
+    def kind(self) -> str:
+        return self.kinematics.kind
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.kinematics.joint_names
+
+    @property
+    def max_joint_velocity(self) -> np.ndarray:
+        """Joint speed limits [rad/s], joint_names order (a fresh array)."""
+        return np.array([j.max_velocity for j in self.joint_limits])
+
+    def inverse(self, positions, twist) -> np.ndarray:
+        """Joint rates [rad/s] for base_link ``twist`` = (vx, vy, wz) at ``positions``."""
+        return self.kinematics.inverse(np.asarray(positions, float), np.asarray(twist, float))
+
+    def forward(self, positions, velocities, estimator: str = "slip_min") -> np.ndarray:
+        """Body twist (vx, vy, wz) in base_link from joint rates [rad/s]."""
+        return self.kinematics.forward(np.asarray(positions, float),
+                                       np.asarray(velocities, float), estimator)
+
+    def jacobian(self, positions) -> np.ndarray:
+        """``J_joint_to_base`` (3 x n) at ``positions``."""
+        return self.kinematics.jacobian(np.asarray(positions, float))
+
+
+def config_search_path() -> list[Path]:
+    """Folders searched for ``<name>.yaml``, first match wins.
+
+    ``HOLONOMIC_CONFIG_PATH`` (os.pathsep-separated), then the repository's
+    ``config/`` (found through this file's real location, so it works from a
+    colcon symlink install), then ``share/holonomic_core/config`` of every
+    AMENT_PREFIX_PATH entry.
+    """
+    dirs = [Path(p) for p in os.environ.get("HOLONOMIC_CONFIG_PATH", "").split(os.pathsep) if p]
+    here = Path(__file__).resolve()
+    if len(here.parents) > 3:
+        dirs.append(here.parents[3] / "config")
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        if prefix:
+            dirs.append(Path(prefix) / "share" / "holonomic_core" / "config")
+    return dirs
+
+
+def resolve_config(source: str | os.PathLike) -> Path:
+    """A config name (``hamr``) or a path to a YAML file -> an existing path."""
+    text = os.fspath(source)
+    path = Path(text)
+    if text.endswith((".yaml", ".yml")) or os.sep in text:
+        if not path.is_file():
+            raise ConfigError("robot", text, "an existing YAML file")
+        return path
+    for folder in config_search_path():
+        candidate = folder / f"{text}.yaml"
+        if candidate.is_file():
+            return candidate
+    names = sorted({p.stem for d in config_search_path() if d.is_dir() for p in d.glob("*.yaml")})
+    raise ConfigError("robot", text, f"a config name {names} or a path to a YAML file")
+
+
+def read_params_file(path: Path, node_name: str = NODE_NAME) -> dict[str, Any]:
+    """Flat parameters of ``node_name`` (and ``/**``) from a ROS 2 params file."""
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError("robot", str(path), f"valid YAML ({exc})") from exc
+    if not isinstance(doc, Mapping):
+        raise ConfigError("robot", str(path), "a ROS 2 params file (a mapping at top level)")
+    flat: dict[str, Any] = {}
+    found = False
+    for key in ("/**", node_name, "/" + node_name):
+        section = doc.get(key)
+        if section is None:
+            continue
+        params = section.get("ros__parameters") if isinstance(section, Mapping) else None
+        if not isinstance(params, Mapping):
+            raise ConfigError(f"{key}.ros__parameters", params, "a mapping of parameters")
+        flat.update(flatten(params))
+        found = True
+    if not found:
+        raise ConfigError("robot", str(path),
+                          f"a params file with a '{node_name}: ros__parameters:' section")
+    return flat
+
+
+def model_specs(flat: Mapping[str, Any]) -> tuple[list[ParamSpec], type[BaseKinematics]]:
+    """Schema of the model keys for the family that ``flat`` names."""
+    if "robot.kinematics" not in flat:
+        raise ConfigError("robot.kinematics", "<missing>", ROBOT_SPECS[1].allowed() + " (required)")
+    kind = ROBOT_SPECS[1].coerce(flat["robot.kinematics"])
+    cls = kinematics_class(kind)
+    specs = ROBOT_SPECS + cls.param_specs(flat)
+    return specs, cls
+
+
+def build_model(flat: Mapping[str, Any]) -> tuple[RobotModel, list[ParamSpec]]:
+    """Validate the model keys of ``flat`` and build the model.
+
+    Returns the model and the specs it consumed (the caller checks the rest).
+    """
+    specs, cls = model_specs(flat)
+    values = validate(specs, flat)
+    kinematics = cls.from_params(values)
+    jspecs = [s for j in kinematics.joint_names for s in joint_specs(j)]
+    jvalues = validate(jspecs, flat)
+    values.update(jvalues)
+    limits = tuple(JointLimits(jvalues[f"joints.{j}.max_velocity"],
+                               jvalues[f"joints.{j}.max_effort"])
+                   for j in kinematics.joint_names)
+    model = RobotModel(values["robot.name"], kinematics, limits, MappingProxyType(values))
+    return model, specs + jspecs
+
+
+def load_model(source: str | os.PathLike, overrides: Mapping[str, Any] | None = None) -> RobotModel:
+    """Load the immutable robot model from a config name or YAML path.
+
+    ``overrides`` are flat keys (``{"ddrot.turret_offset": 0.2}``) applied on
+    top of the file, e.g. for design sweeps. Other sections of the file
+    (controller, driver) are not validated here: see ``load_config``.
+    """
+    flat = read_params_file(resolve_config(source))
+    flat.update(overrides or {})
+    return build_model(flat)[0]
+
+
+def check_no_unknown(specs: list[ParamSpec], flat: Mapping[str, Any],
+                     ignore_prefixes: tuple[str, ...] = ()) -> None:
+    """Reject keys no schema declares, so that a typo is not silently ignored."""
+    extra = [k for k in unknown_keys(specs, flat) if not k.startswith(ignore_prefixes)]
+    if extra:
+        known = sorted({s.name.split(".")[0] for s in specs})
+        raise ConfigError(extra[0], flat[extra[0]],
+                          f"no such parameter (known sections: {known})")

@@ -1,0 +1,164 @@
+"""Parameter schema: one entry per configuration key, shared by YAML and ROS.
+
+Each :class:`ParamSpec` carries what generate_parameter_library's YAML does --
+type, default, description with units, allowed range or choices, read-only --
+so the ROS node declares descriptors from it and the ROS-free loader validates
+the very same keys. Keys are flat, dot-separated names (``ddrot.wheel_radius``),
+which is how ROS 2 params files name nested parameters.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Iterable, Mapping, Sequence
+
+_TYPES = ("double", "int", "bool", "string", "double_array", "string_array")
+
+
+class ConfigError(ValueError):
+    """An invalid configuration value, naming the key and what is allowed."""
+
+    def __init__(self, key: str, value: Any, allowed: str):
+        self.key = key
+        self.value = value
+        self.allowed = allowed
+        super().__init__(f"invalid parameter '{key}' = {value!r}: expected {allowed}")
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """Schema of one parameter.
+
+    ``minimum``/``maximum`` bound numbers (and each element of arrays);
+    ``exclusive_minimum`` makes the lower bound strict (e.g. a radius > 0).
+    ``default`` of ``None`` means the key is required.
+    """
+
+    name: str
+    type: str
+    description: str
+    default: Any = None
+    minimum: float | None = None
+    maximum: float | None = None
+    exclusive_minimum: bool = False
+    choices: tuple[str, ...] | None = None
+    read_only: bool = True
+    min_length: int = 0
+
+    def __post_init__(self):
+        if self.type not in _TYPES:
+            raise ValueError(f"ParamSpec {self.name}: unknown type {self.type}")
+
+    @property
+    def required(self) -> bool:
+        return self.default is None
+
+    def allowed(self) -> str:
+        """Human-readable statement of the allowed values."""
+        kind = {"double": "a number", "int": "an integer", "bool": "true or false",
+                "string": "a string", "double_array": "a list of numbers",
+                "string_array": "a list of strings"}[self.type]
+        parts = [kind]
+        if self.choices:
+            parts = [f"one of {list(self.choices)}"]
+        low = self.minimum
+        if low is not None and self.maximum is not None:
+            bra = "(" if self.exclusive_minimum else "["
+            parts.append(f"in {bra}{low:g}, {self.maximum:g}]")
+        elif low is not None:
+            parts.append(f"{'>' if self.exclusive_minimum else '>='} {low:g}")
+        elif self.maximum is not None:
+            parts.append(f"<= {self.maximum:g}")
+        if self.min_length:
+            parts.append(f"with at least {self.min_length} entries")
+        return " ".join(parts)
+
+    def coerce(self, value: Any) -> Any:
+        """Return ``value`` converted to this type or raise :class:`ConfigError`."""
+        if value is None:
+            raise ConfigError(self.name, value, self.allowed())
+        if self.type == "double":
+            out = self._number(value, self.name)
+        elif self.type == "int":
+            if isinstance(value, bool) or not isinstance(value, int):
+                if isinstance(value, float) and value.is_integer():
+                    value = int(value)
+                else:
+                    raise ConfigError(self.name, value, self.allowed())
+            out = int(value)
+            self._check_range(out, self.name, value)
+        elif self.type == "bool":
+            if not isinstance(value, bool):
+                raise ConfigError(self.name, value, self.allowed())
+            out = value
+        elif self.type == "string":
+            if not isinstance(value, str):
+                raise ConfigError(self.name, value, self.allowed())
+            out = value
+            if self.choices and out not in self.choices:
+                raise ConfigError(self.name, value, self.allowed())
+        elif self.type == "double_array":
+            if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+                raise ConfigError(self.name, value, self.allowed())
+            out = tuple(self._number(v, self.name, whole=value) for v in value)
+        else:  # string_array
+            if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) \
+                    or not all(isinstance(v, str) for v in value):
+                raise ConfigError(self.name, value, self.allowed())
+            out = tuple(value)
+        if self.type.endswith("_array") and len(out) < self.min_length:
+            raise ConfigError(self.name, value, self.allowed())
+        return out
+
+    def _number(self, value: Any, key: str, whole: Any = None) -> float:
+        shown = value if whole is None else whole
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(key, shown, self.allowed())
+        out = float(value)
+        if not math.isfinite(out):
+            raise ConfigError(key, shown, "a finite number")
+        self._check_range(out, key, shown)
+        return out
+
+    def _check_range(self, out: float, key: str, shown: Any) -> None:
+        low, high = self.minimum, self.maximum
+        if low is not None and (out < low or (self.exclusive_minimum and out == low)):
+            raise ConfigError(key, shown, self.allowed())
+        if high is not None and out > high:
+            raise ConfigError(key, shown, self.allowed())
+
+
+def validate(specs: Iterable[ParamSpec], flat: Mapping[str, Any]) -> dict[str, Any]:
+    """Validate ``flat`` against ``specs``: typed values, defaults filled in.
+
+    Raises :class:`ConfigError` for the first missing or invalid key. Keys in
+    ``flat`` that no spec names are left to :func:`unknown_keys`.
+    """
+    out: dict[str, Any] = {}
+    for spec in specs:
+        if spec.name in flat:
+            out[spec.name] = spec.coerce(flat[spec.name])
+        elif spec.required:
+            raise ConfigError(spec.name, "<missing>", spec.allowed() + " (required)")
+        else:
+            out[spec.name] = spec.default
+    return out
+
+
+def unknown_keys(specs: Iterable[ParamSpec], flat: Mapping[str, Any]) -> list[str]:
+    """Keys of ``flat`` that no spec declares (typos, usually)."""
+    names = {s.name for s in specs}
+    return sorted(k for k in flat if k not in names)
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{'a': {'b': 1}}`` -> ``{'a.b': 1}``; lists are leaves."""
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out

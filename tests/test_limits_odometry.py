@@ -1,0 +1,150 @@
+"""Direction-preserving limits and encoder odometry (ROS-free)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from holonomic_core.limits import TwistLimiter, saturate_joint_rates
+from holonomic_core.model import load_model
+from holonomic_core.odometry import Odometry, OdometryNoise, compose_arc
+
+LIMITER = TwistLimiter(max_velocity=(1.0, 0.5, 2.0), max_acceleration=(2.0, 1.0, 4.0),
+                       max_deceleration=(4.0, 2.0, 8.0))
+
+
+def unit(v):
+    return np.asarray(v) / np.linalg.norm(v)
+
+
+def test_velocity_limit_scales_the_whole_twist_and_keeps_its_direction():
+    # y is limited to 0.5: (1.0, 1.0, 0) scales by 0.5 to (0.5, 0.5, 0), not (1.0, 0.5, 0)
+    out, scale = LIMITER.limit_velocity(np.array([1.0, 1.0, 0.0]))
+    np.testing.assert_allclose(out, [0.5, 0.5, 0.0])
+    assert scale == pytest.approx(0.5)
+
+
+def test_acceleration_ramps_along_the_commanded_direction():
+    prev = np.zeros(3)
+    target = np.array([0.5, 0.5, 1.0])  # within speed limits
+    dt = 0.01
+    # from rest: allowed changes per step 0.02, 0.01, 0.04 -> the y axis binds,
+    # scale = 0.01 / 0.5 = 0.02 -> (0.01, 0.01, 0.02)
+    out = LIMITER.limit_acceleration(target, prev, dt)
+    np.testing.assert_allclose(out, [0.01, 0.01, 0.02])
+    for _ in range(200):
+        prev = LIMITER.limit_acceleration(target, prev, dt)
+        np.testing.assert_allclose(unit(prev), unit(target), atol=1e-12)
+    np.testing.assert_allclose(prev, target)
+
+
+def test_deceleration_limit_applies_when_slowing_down():
+    prev = np.array([1.0, 0.0, 0.0])
+    out = LIMITER.limit_acceleration(np.zeros(3), prev, 0.01)
+    # decel 4 m/s^2 * 0.01 s = 0.04
+    np.testing.assert_allclose(out, [0.96, 0.0, 0.0])
+
+
+def test_joint_saturation_scales_all_joints_by_one_factor():
+    rates = np.array([30.0, -10.0, 2.0])
+    out, scale = saturate_joint_rates(rates, np.array([20.0, 20.0, 4.0]))
+    assert scale == pytest.approx(20.0 / 30.0)
+    np.testing.assert_allclose(out, rates * scale)
+    same, one = saturate_joint_rates(np.array([1.0, 2.0, 3.0]), np.array([20.0, 20.0, 4.0]))
+    assert one == 1.0 and np.all(same == [1.0, 2.0, 3.0])
+
+
+def test_joint_saturation_of_a_strafe_keeps_the_twist_direction():
+    """Saturated joint rates map back (forward kinematics) to a twist
+    parallel to the command: the path does not bend."""
+    model = load_model("hamr")
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        q = np.array([0.0, 0.0, rng.uniform(-math.pi, math.pi)])
+        twist = rng.uniform(-3, 3, 3)
+        rates, scale = saturate_joint_rates(model.inverse(q, twist), model.max_joint_velocity)
+        assert np.all(np.abs(rates) <= model.max_joint_velocity + 1e-9)
+        np.testing.assert_allclose(model.forward(q, rates), twist * scale, atol=1e-9)
+
+
+def test_non_finite_rates_never_become_motion():
+    out, scale = saturate_joint_rates(np.array([np.nan, 1.0, 1.0]), np.array([1.0, 1.0, 1.0]))
+    assert scale == 0.0 and np.all(out == 0.0)
+
+
+def test_compose_arc_matches_the_analytic_circle():
+    # constant twist vx = 1 m/s, wz = 1 rad/s for pi/2 s from heading 0:
+    # a quarter circle of radius 1 from (0,0) ends at (1, 1)
+    dx, dth = math.pi / 2, math.pi / 2
+    wx, wy = compose_arc(np.zeros(3), dx, 0.0, dth)
+    assert (wx, wy) == pytest.approx((1.0, 1.0), abs=1e-12)
+
+
+def drive(model, odo, q0, twist, seconds, rate=200.0, stamp0=0.0):
+    """Feed odometry encoder positions of a base driven by a constant twist
+    (joint rates re-solved each step, integrated with small sub-steps)."""
+    q = np.array(q0, dtype=float)
+    dt = 1.0 / rate
+    t = stamp0
+    for _ in range(int(round(seconds * rate))):
+        for _ in range(10):
+            q = q + model.inverse(q, twist) * dt / 10
+        t += dt
+        odo.update(q, t)
+    return q, t
+
+
+def test_odometry_integrates_a_circle_exactly():
+    model = load_model("hamr")
+    odo = Odometry(model)
+    odo.update(np.zeros(3), 0.0)
+    # vx = 0.5 m/s, wz = 0.5 rad/s: radius 1 m, one full circle in 4 pi s
+    drive(model, odo, np.zeros(3), np.array([0.5, 0.0, 0.5]), 4 * math.pi, rate=200)
+    assert odo.pose[:2] == pytest.approx([0.0, 0.0], abs=2e-3)
+    assert odo.pose[2] == pytest.approx(0.0, abs=2e-3)
+    assert odo.distance == pytest.approx(2 * math.pi, rel=1e-3)
+    np.testing.assert_allclose(odo.twist, [0.5, 0.0, 0.5], atol=1e-3)
+
+
+def test_odometry_uses_displacement_so_stalls_and_backward_clocks_do_not_jump():
+    model = load_model("hamr")
+    odo = Odometry(model)
+    odo.update(np.zeros(3), 10.0)
+    # 0.2 m forward in one 200 ms stall
+    q = model.inverse([0, 0, 0], [1.0, 0, 0]) * 0.2
+    odo.update(q, 10.2)
+    assert odo.pose[0] == pytest.approx(0.2, abs=1e-12)
+    # clock jumps backwards while the wheels move 0.1 m more: pose follows the
+    # wheels, no NaN, and the reported velocity is kept from before
+    odo.update(q * 1.5, 5.0)
+    assert odo.pose[0] == pytest.approx(0.3, abs=1e-12)
+    assert np.all(np.isfinite(odo.twist))
+    assert odo.twist[0] == pytest.approx(1.0)
+
+
+def test_odometry_skips_non_finite_encoder_readings():
+    model = load_model("hamr")
+    odo = Odometry(model)
+    odo.update(np.zeros(3), 0.0)
+    assert odo.update(np.array([np.nan, 0.0, 0.0]), 0.01) is False
+    assert np.all(odo.pose == 0.0)
+
+
+def test_pose_covariance_grows_with_distance_and_resets():
+    model = load_model("hamr")
+    odo = Odometry(model, noise=OdometryNoise(linear_variance_per_meter=1e-3))
+    odo.update(np.zeros(3), 0.0)
+    drive(model, odo, np.zeros(3), np.array([1.0, 0.0, 0.0]), 1.0)
+    first = odo.pose_covariance[1, 1]
+    # along-track variance: 1e-3 m^2/m * 1 m
+    assert odo.pose_covariance[0, 0] == pytest.approx(1e-3, rel=1e-3)
+    q, t = drive(model, odo, model.inverse([0, 0, 0], [1.0, 0, 0]) * 1.0,
+                 np.array([1.0, 0.0, 0.0]), 1.0, stamp0=1.0)
+    assert odo.pose_covariance[1, 1] > first
+    assert np.allclose(odo.pose_covariance, odo.pose_covariance.T)
+    assert np.all(np.linalg.eigvalsh(odo.pose_covariance) >= -1e-15)
+    odo.reset()
+    assert np.all(odo.pose_covariance == 0.0) and np.all(odo.pose == 0.0)
+    # after a reset the next reading is the new reference: no jump
+    odo.update(q, t + 0.01)
+    assert np.all(odo.pose == 0.0)

@@ -1,0 +1,178 @@
+"""DDROT (HAMR) kinematics: derivation checks, identities, the paper's facts."""
+
+import math
+
+import numpy as np
+import pytest
+
+from hamr_base.offset_turret import OffsetTurretKinematics
+from holonomic_core.model import load_model
+from holonomic_core.schema import ConfigError
+
+HAMR = dict(wheel_radius=0.0615, half_wheel_separation=0.1641, turret_offset=0.1641)
+# a sweep of turret angles like HSR's twin-caster test: -360..360 deg
+TURRET_SWEEP = np.radians(np.arange(-360.0, 361.0, 15.0))
+
+
+def turret_pose(state, b):
+    """Pose (x, y, heading) of the turret axis / base_link for a drive base at
+    axle midpoint (mx, my) with heading psi and turret angle phi."""
+    mx, my, psi, phi = state
+    return np.array([mx + b * math.cos(psi), my + b * math.sin(psi), psi + phi])
+
+
+def numeric_body_twist(kin, state, rates, h=1e-6):
+    """Differentiate the rigid-body motion: move the drive base as a
+    differential drive for h seconds, then express the turret's velocity
+    in base_link. Independent of the implementation under test."""
+    wl, wr, dphi = rates
+    v = kin.r * (wl + wr) / 2.0
+    wd = kin.r * (wr - wl) / (2.0 * kin.a)
+    mx, my, psi, phi = state
+    nxt = (mx + h * v * math.cos(psi), my + h * v * math.sin(psi), psi + h * wd, phi + h * dphi)
+    prv = (mx - h * v * math.cos(psi), my - h * v * math.sin(psi), psi - h * wd, phi - h * dphi)
+    dpose = (turret_pose(nxt, kin.b) - turret_pose(prv, kin.b)) / (2 * h)
+    th = psi + phi
+    c, s = math.cos(th), math.sin(th)
+    return np.array([c * dpose[0] + s * dpose[1], -s * dpose[0] + c * dpose[1], dpose[2]])
+
+
+@pytest.fixture
+def kin():
+    return OffsetTurretKinematics(**HAMR)
+
+
+def test_inverse_then_forward_is_identity_over_turret_sweep(kin):
+    rng = np.random.default_rng(1)
+    for phi in TURRET_SWEEP:
+        for _ in range(5):
+            twist = rng.uniform(-1.5, 1.5, 3)
+            q = np.array([rng.normal(), rng.normal(), phi])
+            rates = kin.inverse(q, twist)
+            for est in ("slip_min", "pinv", "robust"):
+                np.testing.assert_allclose(kin.forward(q, rates, est), twist, atol=1e-12)
+
+
+def test_forward_then_inverse_is_identity(kin):
+    rng = np.random.default_rng(2)
+    for phi in TURRET_SWEEP:
+        rates = rng.uniform(-20, 20, 3)
+        q = np.array([0.0, 0.0, phi])
+        np.testing.assert_allclose(kin.inverse(q, kin.forward(q, rates)), rates, atol=1e-10)
+
+
+def test_forward_matches_numeric_differentiation_of_the_rigid_body():
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        kin = OffsetTurretKinematics(*rng.uniform(0.03, 0.5, 3))
+        state = (rng.normal(), rng.normal(), rng.uniform(-math.pi, math.pi),
+                 rng.uniform(-2 * math.pi, 2 * math.pi))
+        rates = rng.uniform(-10, 10, 3)
+        q = np.array([0.0, 0.0, state[3]])
+        np.testing.assert_allclose(kin.forward(q, rates), numeric_body_twist(kin, state, rates),
+                                   atol=1e-7)
+
+
+def test_jacobian_matches_forward_and_numeric_derivative(kin):
+    rng = np.random.default_rng(4)
+    for phi in TURRET_SWEEP:
+        q = np.array([0.0, 0.0, phi])
+        J = kin.jacobian(q)
+        rates = rng.uniform(-5, 5, 3)
+        np.testing.assert_allclose(J @ rates, kin.forward(q, rates), atol=1e-12)
+        # numeric Jacobian column by column from the rigid-body motion
+        Jn = np.column_stack([numeric_body_twist(kin, (0, 0, 0.3, phi), e) for e in np.eye(3)])
+        np.testing.assert_allclose(J, Jn, atol=1e-7)
+
+
+def test_paper_equation_1_with_sin_cos_fixed_is_our_model_in_the_papers_frame(kin):
+    """Eq. 1 prints 's = cos, c = sin'. With s = sin, c = cos it is our
+    model once expressed in the paper's frame: X = -vy (right), Y = vx,
+    Phi = wz; wheel 1 = right, wheel 2 = left; theta_s = -turret_joint."""
+    rng = np.random.default_rng(5)
+    for phi in TURRET_SWEEP:
+        wl, wr, dphi = rng.uniform(-10, 10, 3)
+        vx, vy, wz = kin.forward(np.array([0, 0, phi]), np.array([wl, wr, dphi]))
+        X, Y, Phi = kin.paper_jacobian(-phi) @ np.array([wr, wl, -dphi])
+        np.testing.assert_allclose([X, Y, Phi], [-vy, vx, wz], atol=1e-12)
+
+
+def test_printed_equation_1_with_s_equal_cos_is_not_a_rigid_body(kin):
+    """The typo as printed (s = cos, c = sin, i.e. the sin/cos form evaluated
+    at pi/2 - theta_s) disagrees with the rigid-body motion."""
+    phi = 0.4
+    wl, wr, dphi = 3.0, -2.0, 1.0
+    vx, vy, wz = kin.forward(np.array([0, 0, phi]), np.array([wl, wr, dphi]))
+    typo = kin.paper_jacobian(math.pi / 2 - (-phi)) @ np.array([wr, wl, -dphi])
+    assert not np.allclose(typo, [-vy, vx, wz], atol=1e-3)
+
+
+def test_xy_shadow_of_the_mobility_ellipsoid_is_circular_when_a_equals_b():
+    """Image of the unit ball of joint rates, projected on (vx, vy): the
+    ellipse with shape P J J^T P^T. Its (vx, vy) block is
+    2k^2 [[a^2 c^2 + b^2 s^2, cs(b^2 - a^2)], [cs(b^2 - a^2), a^2 s^2 + b^2 c^2]]
+    with k = r / 2a: a multiple of the identity iff a = b (for every phi)."""
+    equal = OffsetTurretKinematics(0.0615, 0.1641, 0.1641)
+    unequal = OffsetTurretKinematics(0.0615, 0.1641, 0.25)
+    for phi in TURRET_SWEEP:
+        q = np.array([0, 0, phi])
+        M = equal.jacobian(q)[:2] @ equal.jacobian(q)[:2].T
+        expected = 2 * (0.0615 / (2 * 0.1641)) ** 2 * 0.1641 ** 2
+        np.testing.assert_allclose(M, expected * np.eye(2), atol=1e-12)
+        eig = np.linalg.eigvalsh(unequal.jacobian(q)[:2] @ unequal.jacobian(q)[:2].T)
+        assert eig[1] / eig[0] > 1.5
+
+
+def test_determinant_vanishes_with_turret_offset():
+    """det J = r^2 b / (2a): the DDROT is singular (not holonomic) at b = 0."""
+    for b in (0.3, 0.1, 1e-3, 1e-6):
+        kin = OffsetTurretKinematics(0.0615, 0.1641, b)
+        for phi in (0.0, 1.0, -2.5):
+            det = np.linalg.det(kin.jacobian(np.array([0, 0, phi])))
+            assert det == pytest.approx(0.0615 ** 2 * b / (2 * 0.1641), rel=1e-9)
+
+
+@pytest.mark.parametrize("key,kwargs", [
+    ("ddrot.turret_offset", dict(HAMR, turret_offset=0.0)),
+    ("ddrot.wheel_radius", dict(HAMR, wheel_radius=-0.05)),
+    ("ddrot.half_wheel_separation", dict(HAMR, half_wheel_separation=0.0)),
+    ("ddrot.wheel_radius", dict(HAMR, wheel_radius=float("nan"))),
+])
+def test_invalid_geometry_is_rejected_naming_the_parameter(key, kwargs):
+    with pytest.raises(ConfigError) as err:
+        OffsetTurretKinematics(**kwargs)
+    assert err.value.key == key
+    assert key in str(err.value)
+
+
+def test_zero_turret_offset_in_a_config_file_is_rejected(tmp_path):
+    text = (load_model_path_text()).replace("turret_offset: 0.1641", "turret_offset: 0.0")
+    path = tmp_path / "flat_turret.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match="ddrot.turret_offset"):
+        load_model(path)
+
+
+def load_model_path_text():
+    from holonomic_core.model import resolve_config
+    return resolve_config("hamr").read_text()
+
+
+def test_load_model_hamr_follows_the_contract():
+    model = load_model("hamr")
+    assert model.joint_names == ("left_wheel_joint", "right_wheel_joint", "turret_joint")
+    kin = model.kinematics
+    assert (kin.r, kin.a, kin.b) == (0.0615, 0.1641, 0.1641)
+    np.testing.assert_allclose(model.max_joint_velocity, [20.0, 20.0, math.radians(270)],
+                               rtol=1e-3)
+    # pure forward at 1 m/s with the drive base aligned: both wheels at 1/r
+    rates = model.inverse([0, 0, 0], [1.0, 0, 0])
+    np.testing.assert_allclose(rates, [1 / 0.0615, 1 / 0.0615, 0.0], atol=1e-12)
+    # spin in place: base_link's origin (the turret axis) must stay put, so
+    # the drive base does not move and only the turret turns
+    np.testing.assert_allclose(model.inverse([0, 0, 0], [0, 0, 1.0]), [0, 0, 1.0], atol=1e-12)
+    # strafe left at 0.1 m/s, aligned: the drive base turns at vy/b (the turret
+    # axis swings on the lever b), wheels differential by a*wd/r, turret counter-rotates
+    wd = 0.1 / 0.1641
+    np.testing.assert_allclose(model.inverse([0, 0, 0], [0, 0.1, 0]),
+                               [-0.1641 * wd / 0.0615, 0.1641 * wd / 0.0615, -wd], atol=1e-12)
