@@ -1,0 +1,25 @@
+# The two commands of the README. Both set everything up themselves
+# (scripts/setup.sh is idempotent and quick when nothing changed).
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+ENV := . ros2_ws/env.sh &&
+
+.PHONY: help setup demo test clean
+
+help:
+	@echo "make demo   set up, then drive the simulated HAMR headless; prints a table, writes a plot"
+	@echo "make test   set up, then run the whole test suite"
+	@echo "make setup  only set up .venv/ and build ros2_ws/"
+	@echo "make clean  remove .venv/, ros2_ws/ and out/"
+
+setup:
+	@scripts/setup.sh
+
+demo: setup
+	@$(ENV) holonomic-demo $(if $(ROBOT),$(ROBOT),hamr) --out out
+
+test: setup
+	@$(ENV) python -m pytest tests -q $(PYTEST_ARGS)
+
+clean:
+	rm -rf .venv ros2_ws out .pytest_cache .hypothesis

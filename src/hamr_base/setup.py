@@ -1,0 +1,19 @@
+from setuptools import find_packages, setup
+
+PACKAGE = "hamr_base"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="Holonomic base developers",
+    maintainer_email="dev@holonomic.invalid",
+    description="DDROT (offset-turret differential drive) kinematics",
+    license="Apache-2.0",
+)

@@ -1,0 +1,26 @@
+from setuptools import find_packages, setup
+
+PACKAGE = "holonomic_bringup"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="Holonomic base developers",
+    maintainer_email="dev@holonomic.invalid",
+    description="Base controller node, launcher and demo",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "holonomic-bringup = holonomic_bringup.bringup:main",
+            "holonomic-demo = holonomic_bringup.demo:main",
+            "base_controller = holonomic_bringup.base_controller_node:main",
+        ],
+    },
+)

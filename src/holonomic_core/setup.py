@@ -1,0 +1,27 @@
+import glob
+import os
+
+from setuptools import find_packages, setup
+
+PACKAGE = "holonomic_core"
+
+# The robot configs live at the repository root (config/) so users find them;
+# install them into share/ so an installed workspace finds them too.
+CONFIGS = sorted(os.path.relpath(p) for p in glob.glob(os.path.join("..", "..", "config", "*.yaml")))
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+        ("share/" + PACKAGE + "/config", CONFIGS),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="Holonomic base developers",
+    maintainer_email="dev@holonomic.invalid",
+    description="ROS-free core: robot model, kinematics protocol, odometry, limits, driver interface",
+    license="Apache-2.0",
+)
