@@ -25,7 +25,8 @@ class Bringup:
                                      start_new_session=True)
 
     def log(self) -> str:
-        self._log.flush()
+        if not self._log.closed:
+            self._log.flush()
         return self.log_path.read_text()
 
     def stop(self, sig=signal.SIGINT, timeout: float = 15.0) -> int:

@@ -89,13 +89,13 @@ def test_stale_cmd_vel_stops_the_base(hamr):
     last_cmd = time.monotonic()
     start = hamr.latest_truth().pose
     # the publisher dies: after cmd_timeout (0.5 s) the base decelerates at
-    # 2.5 m/s^2 -- at rest well within 1.5 s of the last command
+    # 2.0 m/s^2 (hamr.yaml) -- at rest 0.5 + 0.25 s after the last command
     wait_until(lambda: np.linalg.norm(hamr.latest_truth().twist) < 0.01, 3.0,
                "the base to stop after the command went stale")
     assert time.monotonic() - last_cmd < 1.5
-    # coasting distance: 0.5 m/s * 0.5 s + 0.5^2 / (2 * 2.5) = 0.30 m (+ margin)
+    # coasting distance: 0.5 m/s * 0.5 s + 0.5^2 / (2 * 2.0) = 0.31 m (+ margin)
     travelled = np.linalg.norm(hamr.latest_truth().pose[:2] - start[:2])
-    assert travelled < 0.36
+    assert 0.2 < travelled < 0.37
 
 
 def test_nan_commands_never_move_the_base_and_stop_a_moving_one(hamr):

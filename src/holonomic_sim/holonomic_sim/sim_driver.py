@@ -1,0 +1,147 @@
+"""The ``sim`` driver backend: the pybullet stand-in for the hardware.
+
+Behind the same :class:`~holonomic_core.driver.Driver` interface as the real
+motor drives: velocity (or torque) commands in, joint positions, velocities
+and torques out, with each joint's speed and torque limits as the motor
+model. Each :meth:`read` advances the physics by one control period
+(``physics_rate / control_rate`` fixed steps), so the simulation runs exactly
+as fast as the control loop calls it -- in real time under the base
+controller, faster in offline tools -- and its clock is the driver's stamp.
+
+Disarmed (configured but not active), the motors hold their joints still, as
+a drive with its brake engaged would.
+
+Parameters (``sim.*``, in the robot config):
+
+================== ======= ============================================================
+key                 unit    meaning
+================== ======= ============================================================
+physics_rate        Hz      fixed physics step rate, an integer multiple of control_rate
+wheel_friction      --      Coulomb friction coefficient of the drive wheels on the floor
+friction_spread     --      relative spread of per-wheel friction (uneven floor), 0..0.9
+seed                --      seed of that spread (reproducible runs)
+gui                 --      open the pybullet GUI instead of DIRECT mode
+start_pose          m, rad  (x, y, yaw) of base_link in the world at start
+================== ======= ============================================================
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from holonomic_core.driver import Driver, DriverCommunicationError, GroundTruth, JointReading
+from holonomic_core.schema import ConfigError, ParamSpec
+
+#: a base tilted more than this has tipped over: stop reporting a valid state
+_TIP_OVER = math.radians(30.0)
+
+
+class SimDriver(Driver):
+    name = "sim"
+    supports_effort = True
+
+    def __init__(self, model, params, control_rate: float):
+        super().__init__(model, params, control_rate)
+        rate = float(params["sim.physics_rate"])
+        ratio = rate / self.control_rate
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ConfigError("sim.physics_rate", rate,
+                              f"an integer multiple of control_rate ({self.control_rate:g} Hz)")
+        self.substeps = int(round(ratio))
+        self.physics_rate = rate
+        self._world = None
+        self._robot = None
+
+    @classmethod
+    def param_specs(cls, model) -> list[ParamSpec]:
+        return [
+            ParamSpec("sim.physics_rate", "double",
+                      "Fixed physics step rate [Hz]; an integer multiple of control_rate.",
+                      default=1000.0, minimum=10.0, maximum=20000.0),
+            ParamSpec("sim.wheel_friction", "double",
+                      "Coulomb friction coefficient between the drive wheels and the floor [-].",
+                      default=1.0, minimum=0.0, exclusive_minimum=True, maximum=10.0),
+            ParamSpec("sim.friction_spread", "double",
+                      "Relative spread of each wheel's friction around wheel_friction: "
+                      "mu_i = mu (1 + spread u_i), u_i uniform in [-1, 1] [-].",
+                      default=0.0, minimum=0.0, maximum=0.9),
+            ParamSpec("sim.seed", "int", "Seed of the per-wheel friction spread.",
+                      default=0, minimum=0, maximum=2 ** 31 - 1),
+            ParamSpec("sim.gui", "bool", "Open the pybullet GUI (needs a display).",
+                      default=False),
+            ParamSpec("sim.start_pose", "double_array",
+                      "Start pose (x, y, yaw) of base_link in the world [m, m, rad]; "
+                      "ground truth is reported relative to it.",
+                      default=(0.0, 0.0, 0.0), minimum=-1e4, maximum=1e4, min_length=3),
+        ]
+
+    # -- lifecycle ---------------------------------------------------------------
+    def _on_configure(self) -> None:
+        from holonomic_sim.world import Pose2D, SimError, SimWorld
+
+        p = self.params
+        start = tuple(p["sim.start_pose"])
+        if len(start) != 3:
+            raise ConfigError("sim.start_pose", start, "exactly 3 numbers (x, y, yaw)")
+        n_wheels = sum(name.endswith("wheel_joint") for name in self.model.joint_names)
+        rng = np.random.default_rng(p["sim.seed"])
+        friction = p["sim.wheel_friction"] * (
+            1.0 + p["sim.friction_spread"] * rng.uniform(-1.0, 1.0, n_wheels))
+        try:
+            self._world = SimWorld(self.physics_rate, gui=p["sim.gui"])
+            self._robot = self._world.add_robot(self.model, Pose2D(*start), friction)
+        except SimError as exc:
+            if self._world is not None:
+                self._world.close()
+            raise DriverCommunicationError(str(exc), "pybullet") from exc
+        self._world.settle()
+        # odom = where base_link actually rests once settled
+        self._robot.start = Pose2D(*self._robot.world_pose())
+        self.friction = friction
+
+    def _on_activate(self) -> None:
+        self._robot.command_velocities(np.zeros(len(self.model.joint_names)))
+
+    def _on_deactivate(self) -> None:
+        self._robot.hold()
+
+    def _on_close(self) -> None:
+        if self._world is not None:
+            self._world.close()
+            self._world = None
+
+    # -- I/O ----------------------------------------------------------------------
+    def _on_read(self) -> JointReading:
+        self._world.step(self.substeps)
+        if self._robot.tilt() > _TIP_OVER:
+            raise DriverCommunicationError(
+                f"the simulated base tipped over ({math.degrees(self._robot.tilt()):.0f} deg)",
+                "pybullet")
+        positions, velocities, efforts = self._robot.joint_states()
+        return JointReading(self._world.time, positions, velocities, efforts)
+
+    def _on_write_velocities(self, velocities: np.ndarray) -> None:
+        self._robot.command_velocities(velocities)
+
+    def _on_write_efforts(self, efforts: np.ndarray) -> None:
+        self._robot.command_efforts(efforts)
+
+    # -- capabilities -------------------------------------------------------------
+    def sim_time(self) -> float | None:
+        return self._world.time if self._world is not None else None
+
+    def ground_truth(self) -> GroundTruth | None:
+        if self._robot is None:
+            return None
+        return GroundTruth(self._world.time, self._robot.pose(), self._robot.body_twist())
+
+    def status(self) -> dict[str, str]:
+        values = super().status()
+        values.update({"physics_rate_hz": f"{self.physics_rate:g}",
+                       "substeps": str(self.substeps)})
+        if self._world is not None:
+            values["sim_time_s"] = f"{self._world.time:.3f}"
+            values["wheel_friction"] = " ".join(f"{mu:.3f}" for mu in self.friction)
+        return values

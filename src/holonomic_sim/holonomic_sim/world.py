@@ -1,0 +1,225 @@
+"""A pybullet world with a flat floor, stepped at a fixed rate.
+
+Fixed time step and no real-time mode (gym-pybullet-drones); every pybullet
+call passes ``physicsClientId`` so several worlds can live in one process.
+A world holds any number of robots (:meth:`SimWorld.add_robot`), each a
+generated URDF with motor models on its joints.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as pb
+
+from holonomic_sim.urdf import base_height, frictionless_links, generate_urdf
+
+
+class SimError(RuntimeError):
+    """The physics server could not be started or a robot not loaded."""
+
+
+def _yaw_of(quaternion) -> float:
+    x, y, z, w = quaternion
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _wrap(angle: float) -> float:
+    return math.remainder(angle, 2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class Pose2D:
+    """Planar pose [m, m, rad]."""
+
+    x: float = 0.0
+    y: float = 0.0
+    yaw: float = 0.0
+
+    def inverse_compose(self, x: float, y: float, yaw: float) -> np.ndarray:
+        """``self^-1 * (x, y, yaw)``: a world pose expressed in this pose's frame."""
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        dx, dy = x - self.x, y - self.y
+        return np.array([c * dx + s * dy, -s * dx + c * dy, _wrap(yaw - self.yaw)])
+
+
+class SimRobot:
+    """One robot in a :class:`SimWorld`: joint motors, encoders, ground truth.
+
+    Joint arrays are in ``model.joint_names`` order. Motor model: each joint is
+    a velocity-controlled motor that reaches its target speed with at most its
+    ``max_effort`` torque (and never commands more than ``max_velocity``), or,
+    in torque mode, applies a torque clipped to ``max_effort``.
+    """
+
+    def __init__(self, world: "SimWorld", model, start: Pose2D, friction: np.ndarray):
+        self.world = world
+        self.model = model
+        self.start = start
+        cid = world.client
+        urdf = generate_urdf(model)
+        with tempfile.TemporaryDirectory(prefix="holonomic_sim_") as tmp:
+            path = os.path.join(tmp, f"{model.name}.urdf")
+            with open(path, "w") as handle:
+                handle.write(urdf)
+            try:
+                self.body = pb.loadURDF(
+                    path, [start.x, start.y, base_height(model)],
+                    pb.getQuaternionFromEuler([0.0, 0.0, start.yaw]),
+                    flags=pb.URDF_USE_IMPLICIT_CYLINDER | pb.URDF_USE_INERTIA_FROM_FILE,
+                    physicsClientId=cid)
+            except pb.error as exc:
+                raise SimError(f"pybullet could not load the generated URDF: {exc}") from exc
+        joints_by_name, links_by_name = {}, {}
+        for index in range(pb.getNumJoints(self.body, physicsClientId=cid)):
+            info = pb.getJointInfo(self.body, index, physicsClientId=cid)
+            joints_by_name[info[1].decode()] = index
+            links_by_name[info[12].decode()] = index
+        self.joint_indices = [joints_by_name[name] for name in model.joint_names]
+        self.max_velocity = model.max_joint_velocity
+        self.max_effort = np.array([j.max_effort for j in model.joint_limits])
+        # No artificial drag: pybullet's default link damping slows every body.
+        for link in [-1] + list(links_by_name.values()):
+            pb.changeDynamics(self.body, link, linearDamping=0.0, angularDamping=0.0,
+                              physicsClientId=cid)
+        # Traction only at the wheels: friction set explicitly on each.
+        wheels = [j for j, name in zip(self.joint_indices, model.joint_names)
+                  if name.endswith("wheel_joint")]
+        if len(friction) != len(wheels):
+            raise ValueError(f"{len(friction)} friction values for {len(wheels)} wheels")
+        for link, mu in zip(wheels, friction):
+            pb.changeDynamics(self.body, link, lateralFriction=float(mu), rollingFriction=0.0,
+                              spinningFriction=0.0, physicsClientId=cid)
+        for name in frictionless_links(model):
+            pb.changeDynamics(self.body, links_by_name[name], lateralFriction=0.0,
+                              rollingFriction=0.0, spinningFriction=0.0, physicsClientId=cid)
+        self._torque_mode = False
+        self._efforts = np.zeros(len(self.joint_indices))
+        self.hold()
+
+    # -- motors -----------------------------------------------------------------
+    def command_velocities(self, velocities: np.ndarray) -> None:
+        """Target joint speeds [rad/s], clipped to the speed limits."""
+        target = np.clip(np.asarray(velocities, float), -self.max_velocity, self.max_velocity)
+        self._torque_mode = False
+        pb.setJointMotorControlArray(self.body, self.joint_indices, pb.VELOCITY_CONTROL,
+                                     targetVelocities=target.tolist(),
+                                     forces=self.max_effort.tolist(),
+                                     physicsClientId=self.world.client)
+
+    def command_efforts(self, efforts: np.ndarray) -> None:
+        """Joint torques [N m], clipped to the torque limits; applied every step."""
+        if not self._torque_mode:
+            # pybullet's velocity motors must be released before torque control.
+            pb.setJointMotorControlArray(self.body, self.joint_indices, pb.VELOCITY_CONTROL,
+                                         forces=[0.0] * len(self.joint_indices),
+                                         physicsClientId=self.world.client)
+            self._torque_mode = True
+        self._efforts = np.clip(np.asarray(efforts, float), -self.max_effort, self.max_effort)
+
+    def hold(self) -> None:
+        """Brake every joint: zero speed with full torque (a drive holding still)."""
+        self.command_velocities(np.zeros(len(self.joint_indices)))
+
+    def before_step(self) -> None:
+        # TORQUE_CONTROL forces last one simulation step in pybullet.
+        if self._torque_mode:
+            pb.setJointMotorControlArray(self.body, self.joint_indices, pb.TORQUE_CONTROL,
+                                         forces=self._efforts.tolist(),
+                                         physicsClientId=self.world.client)
+
+    # -- sensors ----------------------------------------------------------------
+    def joint_states(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions [rad], velocities [rad/s] and motor torques [N m]."""
+        states = pb.getJointStates(self.body, self.joint_indices,
+                                   physicsClientId=self.world.client)
+        positions = np.array([s[0] for s in states])
+        velocities = np.array([s[1] for s in states])
+        efforts = self._efforts.copy() if self._torque_mode else np.array([s[3] for s in states])
+        return positions, velocities, efforts
+
+    def world_pose(self) -> tuple[float, float, float]:
+        """base_link's planar pose in the world [m, m, rad]."""
+        position, orientation = pb.getBasePositionAndOrientation(
+            self.body, physicsClientId=self.world.client)
+        return position[0], position[1], _yaw_of(orientation)
+
+    def pose(self) -> np.ndarray:
+        """base_link's planar pose relative to its start pose (the odom frame)."""
+        return self.start.inverse_compose(*self.world_pose())
+
+    def body_twist(self) -> np.ndarray:
+        """(vx, vy, wz) of base_link in base_link [m/s, m/s, rad/s]."""
+        linear, angular = pb.getBaseVelocity(self.body, physicsClientId=self.world.client)
+        yaw = self.world_pose()[2]
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([c * linear[0] + s * linear[1], -s * linear[0] + c * linear[1],
+                         angular[2]])
+
+    def tilt(self) -> float:
+        """Angle [rad] between base_link's z axis and the vertical (tip-over check)."""
+        _, orientation = pb.getBasePositionAndOrientation(self.body,
+                                                          physicsClientId=self.world.client)
+        matrix = pb.getMatrixFromQuaternion(orientation)
+        return math.acos(max(-1.0, min(1.0, matrix[8])))
+
+
+class SimWorld:
+    """A physics server with a flat floor, stepped at ``physics_rate`` [Hz]."""
+
+    def __init__(self, physics_rate: float = 1000.0, gui: bool = False):
+        self.dt = 1.0 / physics_rate
+        self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
+        if self.client < 0:
+            raise SimError("pybullet could not connect"
+                           + (" to a GUI (is there a display?)" if gui else ""))
+        cid = self.client
+        pb.resetSimulation(physicsClientId=cid)
+        pb.setGravity(0.0, 0.0, -9.81, physicsClientId=cid)
+        pb.setTimeStep(self.dt, physicsClientId=cid)
+        pb.setRealTimeSimulation(0, physicsClientId=cid)
+        floor = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid)
+        self.floor = pb.createMultiBody(0.0, floor, physicsClientId=cid)
+        pb.changeDynamics(self.floor, -1, lateralFriction=1.0, physicsClientId=cid)
+        self.robots: list[SimRobot] = []
+        self.steps = 0
+
+    @property
+    def time(self) -> float:
+        """Simulated time [s] since the world was created."""
+        return self.steps * self.dt
+
+    def add_robot(self, model, start: Pose2D = Pose2D(), friction=None) -> SimRobot:
+        """Load ``model`` at ``start`` (world frame); ``friction``: one Coulomb
+        coefficient per wheel (default 1.0). The robot starts braked."""
+        n_wheels = sum(name.endswith("wheel_joint") for name in model.joint_names)
+        mu = np.ones(n_wheels) if friction is None else np.asarray(friction, float)
+        robot = SimRobot(self, model, start, mu)
+        self.robots.append(robot)
+        return robot
+
+    def settle(self, seconds: float = 0.2) -> None:
+        """Step with all robots braked so that they come to rest on the floor."""
+        for robot in self.robots:
+            robot.hold()
+        self.step(max(1, round(seconds / self.dt)))
+        self.steps = 0
+
+    def step(self, count: int = 1) -> None:
+        for _ in range(count):
+            for robot in self.robots:
+                robot.before_step()
+            pb.stepSimulation(physicsClientId=self.client)
+            self.steps += 1
+
+    def close(self) -> None:
+        if self.client >= 0:
+            try:
+                pb.disconnect(physicsClientId=self.client)
+            except pb.error:
+                pass
+            self.client = -1
