@@ -16,7 +16,7 @@ setup:
 	@scripts/setup.sh
 
 demo: setup
-	@$(ENV) holonomic-demo $(if $(ROBOT),$(ROBOT),hamr) --out out
+	@$(ENV) holonomic-demo --robot $(if $(ROBOT),$(ROBOT),hamr) --out out
 
 test: setup
 	@$(ENV) python -m pytest tests -q $(PYTEST_ARGS)

@@ -41,15 +41,19 @@ SCRIPT = (
     Segment("strafe left (constant heading)", (0.0, 0.4, 0.0), 3.0),
     Segment("diagonal", (0.35, -0.35, 0.0), 3.0),
     Segment("spin in place", (0.0, 0.0, 1.5), 3.0),
+    Segment("translate while rotating", (0.3, 0.2, 0.6), 4.0),
     Segment("line in odom while spinning", (-0.3, 0.2, 1.0), 4.0, frame="odom"),
 )
-RATE = 20.0          # [Hz] teleop publish rate
+RATE = 50.0          # [Hz] teleop publish rate
 STEADY = 0.5         # fraction of a segment (its end) averaged as "achieved"
 
 
 def body_command(seg: Segment, yaw: float) -> tuple[float, float, float]:
+    """The body twist to publish now; ``yaw`` [rad]: the odometry heading."""
     vx, vy, wz = seg.twist
     if seg.frame == "odom":
+        # The command holds until the next one: aim at the mid-period heading.
+        yaw += 0.5 * wz / RATE
         c, s = math.cos(yaw), math.sin(yaw)
         return (c * vx + s * vy, -s * vx + c * vy, wz)
     return seg.twist
