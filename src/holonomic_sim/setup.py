@@ -16,4 +16,9 @@ setup(
     maintainer_email="dev@holonomic.invalid",
     description="pybullet stand-in for the hardware, as a driver backend",
     license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "holonomic-odometry-experiment = holonomic_sim.odometry_experiment:main",
+        ],
+    },
 )

@@ -316,6 +316,8 @@ class BaseControllerNode(Node):
         level_driver = DiagnosticStatus.ERROR if state is ControllerState.FAULT else DiagnosticStatus.OK
         driver_values = dict(self.driver.status())
         driver_values["controller_state"] = state.value
+        driver_values["driver_errors"] = str(c.counters["driver_errors"])
+        driver_values["implausible_readings"] = str(c.counters["implausible_readings"])
         if c.fault:
             driver_values["fault"] = c.fault
         loop = self.loop.stats.summary()

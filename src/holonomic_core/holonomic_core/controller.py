@@ -29,12 +29,13 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from holonomic_core.driver import (DRIVER_REGISTRY, Driver, DriverError, DriverState,
-                                   JointReading, driver_class)
+from holonomic_core.driver import (DRIVER_REGISTRY, Driver, DriverError, DriverFault,
+                                   DriverState, JointReading, driver_class)
 from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.limits import TwistLimiter, is_finite_twist, saturate_joint_rates
 from holonomic_core.model import (RobotModel, build_model, check_no_unknown, read_params_file,
                                   resolve_config)
+from holonomic_core.monitor import MonitorLimits, ReadingMonitor
 from holonomic_core.odometry import Odometry, OdometryNoise
 from holonomic_core.schema import ConfigError, ParamSpec, validate
 
@@ -95,6 +96,22 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) [(m/s)^2, (m/s)^2, (rad/s)^2].",
               default=(4e-4, 4e-4, 1e-3), minimum=0.0, maximum=100.0, min_length=3),
+    ParamSpec("safety.velocity_factor", "double",
+              "A measured joint speed above this multiple of the joint's speed limit is an "
+              "encoder glitch: the controller faults and stops the base [-].",
+              default=3.0, minimum=1.5, maximum=1000.0),
+    ParamSpec("safety.reading_timeout", "double",
+              "Joint readings whose stamp has not advanced for this long are frozen: "
+              "fault and stop [s].", default=0.05, minimum=0.001, maximum=10.0),
+    ParamSpec("safety.tracking_error", "double",
+              "A joint whose measured speed differs from its command by more than this "
+              "fraction of its speed limit, for safety.tracking_timeout, cannot follow "
+              "(saturated or blocked): fault and stop [-].",
+              default=0.3, minimum=0.01, maximum=100.0),
+    ParamSpec("safety.tracking_timeout", "double",
+              "How long a joint may miss its command by safety.tracking_error before the "
+              "controller faults [s]; 0 disables the check.",
+              default=0.5, minimum=0.0, maximum=60.0),
 ] + _limit_specs()
 
 
@@ -116,6 +133,7 @@ class ControllerConfig:
     max_acceleration: tuple[float, float, float]
     max_deceleration: tuple[float, float, float]
     noise: OdometryNoise
+    monitor: MonitorLimits
 
     @classmethod
     def from_values(cls, v: Mapping[str, Any]) -> "ControllerConfig":
@@ -139,6 +157,8 @@ class ControllerConfig:
                                 v["odometry.angular_variance_per_radian"],
                                 v["odometry.angular_variance_per_meter"],
                                 tuple(v["odometry.twist_variance"])),
+            monitor=MonitorLimits(v["safety.velocity_factor"], v["safety.reading_timeout"],
+                                  v["safety.tracking_error"], v["safety.tracking_timeout"]),
         )
 
 
@@ -214,6 +234,8 @@ class BaseController:
         self.cmd_timeout = c.cmd_timeout
         self.limiter = TwistLimiter(c.max_velocity, c.max_acceleration, c.max_deceleration)
         self.odometry = Odometry(self.model, c.estimator, c.noise)
+        self.monitor = ReadingMonitor(self.model.joint_names, self.model.max_joint_velocity,
+                                      self.dt, c.monitor)
         self._clock = clock
         self._max_rates = self.model.max_joint_velocity
         n = len(self.model.joint_names)
@@ -229,7 +251,7 @@ class BaseController:
         self.stale = True
         self.fault: str | None = None
         self.counters = {"rejected_commands": 0, "timeouts": 0, "driver_errors": 0,
-                         "cycles": 0}
+                         "implausible_readings": 0, "cycles": 0}
 
     # -- inputs (any thread) -------------------------------------------------------
     def set_command(self, twist, received: float | None = None) -> str | None:
@@ -290,6 +312,16 @@ class BaseController:
         except DriverError as exc:
             self._on_fault(exc)
             return False
+        problem = self.monitor.check(reading, self._clock(),
+                                     self.joint_command if self.driver.armed else None)
+        if problem is not None:
+            # keep the bad sample out of the odometry: the next good reading
+            # becomes its new reference (the pose is kept)
+            self.odometry.rebase()
+            if self.fault is None or self.driver.armed:
+                self.counters["implausible_readings"] += 1
+                self._on_fault(DriverFault(problem))
+            return False
         self.reading = reading
         self.odometry.update(reading.positions, reading.stamp)
 
@@ -346,8 +378,13 @@ class BaseController:
     def _arm(self) -> tuple[bool, str]:
         if self.driver.armed:
             return True, "already armed"
-        # A fault is cleared only if the driver answers again.
-        self.driver.read()
+        # A fault is cleared only if the driver answers again, plausibly.
+        reading = self.driver.read()
+        self.monitor.reset()
+        problem = self.monitor.check(reading, self._clock())
+        if problem is not None:
+            raise DriverFault(problem)
+        self.odometry.rebase()
         self.fault = None
         if self.driver.state is DriverState.INACTIVE:
             self.driver.activate()

@@ -22,6 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 
 
+#: contact-velocity residual [m/s] that doubles the odometry variances
+SLIP_SCALE = 0.01
+
+
 def wrap_angle(angle: float) -> float:
     """Angle wrapped to [-pi, pi] [rad]."""
     return math.remainder(angle, 2.0 * math.pi)
@@ -89,9 +93,17 @@ class Odometry:
         self.pose_covariance = np.zeros((3, 3))
         self.twist_covariance = self._base_twist_cov.copy()
         self.residual = np.zeros(0)
+        self.slip_factor = 1.0
         self.distance = 0.0
         self._last_positions: np.ndarray | None = None
         self._last_stamp: float | None = None
+
+    def rebase(self) -> None:
+        """Keep the pose; take the next reading as the new encoder reference
+        (after an implausible reading, or a gap in which the joints moved
+        unobserved)."""
+        self._last_positions = None
+        self._last_stamp = None
 
     def update(self, positions: np.ndarray, stamp: float) -> bool:
         """Integrate the displacement since the last reading.
@@ -110,11 +122,11 @@ class Odometry:
         mid = self._last_positions + 0.5 * dq
         disp = self.model.forward(mid, dq, self.estimator)
         dt = stamp - self._last_stamp
+        if dt > 0.0:
+            self._update_slip(self.model.kinematics.fit_residual(mid, dq / dt, self.estimator))
         self._integrate(disp)
         if dt > 0.0:
             self.twist = disp / dt
-            self._update_twist_covariance(
-                self.model.kinematics.fit_residual(mid, dq / dt, self.estimator))
         self._last_positions = np.array(positions, dtype=float)
         self._last_stamp = stamp
         return True
@@ -138,17 +150,19 @@ class Odometry:
         c, s = math.cos(heading), math.sin(heading)
         F = np.array([[1.0, 0.0, -wy], [0.0, 1.0, wx], [0.0, 0.0, 1.0]])
         G = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        Q = np.diag((var_lin, var_lin, var_ang))
+        Q = np.diag((var_lin, var_lin, var_ang)) * self.slip_factor
         self.pose_covariance = F @ self.pose_covariance @ F.T + G @ Q @ G.T
 
-    def _update_twist_covariance(self, residual: np.ndarray) -> None:
-        """Scale the twist covariance by the slip the estimator could not explain.
+    def _update_slip(self, residual: np.ndarray) -> None:
+        """Scale the covariances by the slip the estimator could not explain.
 
-        With residual norm rho [m/s] per wheel unit, the variance is multiplied
-        by 1 + (max rho / 0.01 m/s)^2: 1 cm/s of unexplained contact velocity
-        doubles it. A square (DDROT) model has no residual.
+        With residual norm rho [m/s] per wheel unit, the twist variance and the
+        pose variance added by this increment are multiplied by
+        ``slip_factor = 1 + (max rho / SLIP_SCALE)^2``: 1 cm/s of unexplained
+        contact velocity doubles them. A square (DDROT) model has no residual.
         """
         self.residual = residual
+        self.slip_factor = 1.0
         if residual.size:
-            factor = 1.0 + (float(np.max(residual)) / 0.01) ** 2
-            self.twist_covariance = self._base_twist_cov * factor
+            self.slip_factor = 1.0 + (float(np.max(residual)) / SLIP_SCALE) ** 2
+        self.twist_covariance = self._base_twist_cov * self.slip_factor

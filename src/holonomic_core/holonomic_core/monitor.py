@@ -1,0 +1,127 @@
+"""Plausibility checks of joint readings: what a driver cannot see itself.
+
+A driver reports what its devices say. Some failures only show in the
+numbers: an encoder glitch (a velocity spike of thousands of rad/s, a
+position that jumps), a device that keeps answering with a frozen sample, or
+a motor that cannot follow its command because it is saturated or blocked.
+:class:`ReadingMonitor` checks every reading before odometry or control uses
+it and returns a message naming the joint when one is implausible; the
+controller then faults, stops the base and keeps the bad sample out of the
+odometry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MonitorLimits:
+    """Thresholds of :class:`ReadingMonitor`.
+
+    ``velocity_factor`` [-]: a measured joint speed above this multiple of the
+    joint's speed limit is a glitch (position increments are held to the same
+    bound); ``reading_timeout`` [s]: readings whose stamp has not advanced for
+    this long are frozen; ``tracking_error`` [-]: a joint whose measured speed
+    differs from its command by more than this fraction of its speed limit ...
+    ``tracking_timeout`` [s]: ... for this long cannot follow (0 disables).
+    """
+
+    velocity_factor: float = 3.0
+    reading_timeout: float = 0.05
+    tracking_error: float = 0.3
+    tracking_timeout: float = 0.5
+
+
+class ReadingMonitor:
+    """Checks a stream of JointReadings; one per control cycle.
+
+    ``joint_names`` and ``max_velocity`` [rad/s] in joint order;
+    ``period`` [s]: the control period.
+    """
+
+    def __init__(self, joint_names, max_velocity, period: float, limits: MonitorLimits):
+        self.joint_names = tuple(joint_names)
+        self.max_velocity = np.asarray(max_velocity, float)
+        self.period = float(period)
+        self.limits = limits
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the reference sample (after a fault is cleared, or re-arming)."""
+        self._last_positions: np.ndarray | None = None
+        self._last_stamp: float | None = None
+        self._stamp_changed_at: float | None = None
+        self._tracking_since: float | None = None
+
+    def check(self, reading, now: float, command: np.ndarray | None = None) -> str | None:
+        """Return why ``reading`` is implausible, or None.
+
+        ``now`` [s]: the controller's clock; ``command`` [rad/s]: the joint
+        velocities the driver was last told to follow (None when disarmed).
+        An implausible reading does not become the reference for the next one.
+        """
+        n = len(self.joint_names)
+        positions = np.asarray(reading.positions, float)
+        velocities = np.asarray(reading.velocities, float)
+        if positions.shape != (n,) or velocities.shape != (n,):
+            return (f"driver returned {positions.shape[0] if positions.ndim else 0} positions and "
+                    f"{velocities.shape[0] if velocities.ndim else 0} velocities for {n} joints")
+        for values, what in ((positions, "position"), (velocities, "velocity")):
+            bad = np.flatnonzero(~np.isfinite(values))
+            if bad.size:
+                return f"{self.joint_names[bad[0]]}: non-finite {what} reading ({values[bad[0]]})"
+        bound = self.limits.velocity_factor * self.max_velocity
+        over = np.flatnonzero(np.abs(velocities) > bound)
+        if over.size:
+            i = over[0]
+            return (f"{self.joint_names[i]}: velocity reading {velocities[i]:.4g} rad/s is over "
+                    f"{self.limits.velocity_factor:g}x its limit ({self.max_velocity[i]:g} rad/s): "
+                    "encoder glitch")
+        if self._last_positions is not None:
+            dt = reading.stamp - self._last_stamp
+            if dt < 0.0:
+                # the clock restarted (simulation reset): a new reference
+                self._accept(positions, reading.stamp, now)
+                return None
+            allowed = bound * max(dt, self.period) + 1e-6
+            jump = np.abs(positions - self._last_positions)
+            over = np.flatnonzero(jump > allowed)
+            if over.size:
+                i = over[0]
+                return (f"{self.joint_names[i]}: position jumped by {jump[i]:.4g} rad in "
+                        f"{dt:.4g} s: encoder glitch")
+            if dt == 0.0:
+                frozen = now - self._stamp_changed_at
+                if self.limits.reading_timeout > 0.0 and frozen > self.limits.reading_timeout:
+                    return f"joint readings stopped updating {frozen:.3f} s ago"
+                return None
+        problem = self._check_tracking(velocities, now, command)
+        self._accept(positions, reading.stamp, now)
+        return problem
+
+    def _accept(self, positions, stamp, now) -> None:
+        self._last_positions = positions.copy()
+        self._last_stamp = stamp
+        self._stamp_changed_at = now
+
+    def _check_tracking(self, velocities, now, command) -> str | None:
+        if command is None or self.limits.tracking_timeout <= 0.0:
+            self._tracking_since = None
+            return None
+        error = np.abs(np.asarray(command, float) - velocities)
+        over = np.flatnonzero(error > self.limits.tracking_error * self.max_velocity)
+        if not over.size:
+            self._tracking_since = None
+            return None
+        if self._tracking_since is None:
+            self._tracking_since = now
+            return None
+        if now - self._tracking_since < self.limits.tracking_timeout:
+            return None
+        i = over[0]
+        return (f"{self.joint_names[i]}: cannot follow its command ({command[i]:.3g} rad/s "
+                f"commanded, {velocities[i]:.3g} rad/s measured for "
+                f"{now - self._tracking_since:.2f} s): motor saturated or blocked")
