@@ -135,9 +135,11 @@ class OffsetTurretKinematics(BaseKinematics):
             _positive("ddrot.wheel_radius", "Drive wheel radius r [m]."),
             _positive("ddrot.half_wheel_separation",
                       "Half the distance between the wheels' contact points, a [m]."),
-            _positive("ddrot.turret_offset",
+            # minimum 0 inclusive: b = 0 reaches the constructor, whose error
+            # explains why it is not allowed (the base is not holonomic)
+            ParamSpec("ddrot.turret_offset", "double",
                       "Distance b [m] from the axle midpoint forward to the turret axis; "
-                      "must be > 0 for holonomic motion."),
+                      "must be > 0 for holonomic motion.", minimum=0.0, maximum=100.0),
             # Physical body, read by the simulator's URDF generator (and by
             # dynamics): masses [kg], lengths [m]. Inertias follow from the
             # solid shapes.

@@ -22,6 +22,7 @@ from __future__ import annotations
 import concurrent.futures
 import enum
 import math
+import numbers
 import threading
 import time
 from dataclasses import dataclass, field
@@ -263,13 +264,16 @@ class BaseController:
         """
         now = self._clock() if received is None else received
         try:
-            values = np.array([float(twist[0]), float(twist[1]), float(twist[2])])
-        except (TypeError, ValueError, IndexError):
+            parts = [twist[0], twist[1], twist[2]]
+            values = np.array([float(v) for v in parts]) if all(
+                isinstance(v, numbers.Real) and not isinstance(v, bool) for v in parts) else None
+        except (TypeError, ValueError, IndexError, KeyError):
             values = None
         if values is None or not is_finite_twist(values):
             self.counters["rejected_commands"] += 1
             self._command = (_ZERO3, now)
-            return f"non-finite command {tuple(twist)!r} rejected; stopping the base"
+            what = "non-finite" if values is not None else "malformed"
+            return f"{what} command {repr(twist)[:80]} rejected; stopping the base"
         self._command = (values, now)
         return None
 

@@ -1,0 +1,84 @@
+"""Every kind of invalid robot YAML fails at start with a message naming the
+key and what is allowed, and a non-zero exit -- never a bare traceback."""
+
+import re
+
+import pytest
+
+from holonomic_core.controller import load_config
+from holonomic_core.model import resolve_config
+from holonomic_core.schema import ConfigError
+
+HAMR = resolve_config("hamr").read_text()
+
+
+def mutate(pattern: str, replacement: str) -> str:
+    text, count = re.subn(pattern, replacement, HAMR, count=1, flags=re.MULTILINE)
+    assert count == 1, f"pattern {pattern!r} not in hamr.yaml"
+    return text
+
+
+# (case, YAML text, key the message must name, words of what is allowed)
+CASES = [
+    ("missing required key", mutate(r"^\s*turret_offset: .*\n", ""),
+     "ddrot.turret_offset", "required"),
+    ("negative radius", mutate(r"wheel_radius: 0.0615", "wheel_radius: -0.0615"),
+     "ddrot.wheel_radius", "(0, 100]"),
+    ("zero turret offset", mutate(r"turret_offset: 0.1641", "turret_offset: 0.0"),
+     "ddrot.turret_offset", "not holonomic"),
+    ("string for a number", mutate(r"control_rate: 200.0", "control_rate: fast"),
+     "control_rate", "a number"),
+    ("number for a bool", mutate(r"publish_tf: true", "publish_tf: 1"),
+     "publish_tf", "true or false"),
+    ("list for a number", mutate(r"cmd_timeout: 0.5", "cmd_timeout: [0.5]"),
+     "cmd_timeout", "a number"),
+    ("empty value", mutate(r"cmd_timeout: 0.5", "cmd_timeout:"), "cmd_timeout", "a number"),
+    ("infinite value", mutate(r"max_velocity: 20.0", "max_velocity: .inf"),
+     "joints.left_wheel_joint.max_velocity", "finite"),
+    ("out of range", mutate(r"control_rate: 200.0", "control_rate: 5000.0"),
+     "control_rate", "[1, 1000]"),
+    ("unknown driver", mutate(r"driver: sim ", "driver: tcp "), "driver", "one of"),
+    ("unknown kinematics", mutate(r"kinematics: ddrot", "kinematics: mecanum"),
+     "robot.kinematics", "one of"),
+    ("unknown estimator", mutate(r"estimator: slip_min", "estimator: kalman"),
+     "estimator", "one of"),
+    ("typo in a key", mutate(r"cmd_timeout: 0.5", "cmd_timout: 0.5"),
+     "cmd_timout", "no such parameter"),
+    ("physics not a multiple of control", mutate(r"physics_rate: 1000.0", "physics_rate: 1100.0"),
+     "sim.physics_rate", "integer multiple"),
+    ("section that is not a mapping", mutate(r"^    ddrot:\n(.*\n){3}", "    ddrot: 5\n"),
+     "ddrot.wheel_radius", "required"),
+    ("wrong node name", HAMR.replace("base_controller:", "controller:", 1),
+     "robot", "base_controller: ros__parameters"),
+    ("not YAML", HAMR + "\n  : - : [\n", "robot", "valid YAML"),
+]
+
+
+@pytest.mark.parametrize("case,text,key,allowed", CASES, ids=[c[0] for c in CASES])
+def test_invalid_yaml_is_rejected_naming_the_key(tmp_path, case, text, key, allowed):
+    path = tmp_path / "robot.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        cfg = load_config(path)
+        # driver-level checks happen when the driver is built
+        cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
+    assert err.value.key == key, str(err.value)
+    assert allowed in str(err.value)
+
+
+@pytest.mark.parametrize("index", [1, 3, 9, 13], ids=lambda i: CASES[i][0])
+def test_bringup_exits_2_with_one_line_naming_the_key(start_bringup, tmp_path, index):
+    case, text, key, allowed = CASES[index]
+    path = tmp_path / "robot.yaml"
+    path.write_text(text)
+    proc = start_bringup(str(path))
+    assert proc.proc.wait(30) == 2
+    log = proc.log()
+    assert key in log and allowed in log
+    assert "Traceback" not in log
+
+
+def test_bringup_with_a_missing_file_exits_2(start_bringup, tmp_path):
+    proc = start_bringup(str(tmp_path / "nowhere.yaml"))
+    assert proc.proc.wait(30) == 2
+    assert "an existing YAML file" in proc.log() and "Traceback" not in proc.log()
