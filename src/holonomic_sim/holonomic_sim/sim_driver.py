@@ -42,8 +42,13 @@ class SimDriver(Driver):
     name = "sim"
     supports_effort = True
 
-    def __init__(self, model, params, control_rate: float):
+    def __init__(self, model, params, control_rate: float, world=None):
+        """``world``: a shared :class:`~holonomic_sim.world.SimWorld` (a fleet
+        in one simulation). Its owner then steps it once per control period
+        for all robots, and ``read`` does not step; by default the driver
+        owns a world of its own and steps it."""
         super().__init__(model, params, control_rate)
+        self._shared_world = world
         rate = float(params["sim.physics_rate"])
         ratio = rate / self.control_rate
         if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
@@ -90,15 +95,20 @@ class SimDriver(Driver):
         friction = p["sim.wheel_friction"] * (
             1.0 + p["sim.friction_spread"] * rng.uniform(-1.0, 1.0, n_wheels))
         try:
-            self._world = SimWorld(self.physics_rate, gui=p["sim.gui"])
+            if self._shared_world is not None:
+                if abs(self._shared_world.dt * self.physics_rate - 1.0) > 1e-9:
+                    raise ConfigError("sim.physics_rate", self.physics_rate,
+                                      f"the shared world's rate ({1 / self._shared_world.dt:g} Hz)")
+                self._world = self._shared_world
+            else:
+                self._world = SimWorld(self.physics_rate, gui=p["sim.gui"])
             self._robot = self._world.add_robot(self.model, Pose2D(*start), friction)
         except SimError as exc:
-            if self._world is not None:
+            if self._world is not None and self._shared_world is None:
                 self._world.close()
             raise DriverCommunicationError(str(exc), "pybullet") from exc
-        self._world.settle()
-        # odom = where base_link actually rests once settled
-        self._robot.start = Pose2D(*self._robot.world_pose())
+        if self._shared_world is None:
+            self._world.settle()      # odom = where base_link rests once settled
         self.friction = friction
 
     def _on_activate(self) -> None:
@@ -109,12 +119,16 @@ class SimDriver(Driver):
 
     def _on_close(self) -> None:
         if self._world is not None:
-            self._world.close()
+            if self._shared_world is None:
+                self._world.close()
+            else:
+                self._robot.hold()
             self._world = None
 
     # -- I/O ----------------------------------------------------------------------
     def _on_read(self) -> JointReading:
-        self._world.step(self.substeps)
+        if self._shared_world is None:
+            self._world.step(self.substeps)
         if self._robot.tilt() > _TIP_OVER:
             raise DriverCommunicationError(
                 f"the simulated base tipped over ({math.degrees(self._robot.tilt()):.0f} deg)",

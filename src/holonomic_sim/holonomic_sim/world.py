@@ -203,11 +203,15 @@ class SimWorld:
         return robot
 
     def settle(self, seconds: float = 0.2) -> None:
-        """Step with all robots braked so that they come to rest on the floor."""
+        """Step with all robots braked so that they come to rest on the floor;
+        then the clock restarts at 0 and each robot's start pose (the origin
+        of its ground truth) is where it rests."""
         for robot in self.robots:
             robot.hold()
         self.step(max(1, round(seconds / self.dt)))
         self.steps = 0
+        for robot in self.robots:
+            robot.start = Pose2D(*robot.world_pose())
 
     def step(self, count: int = 1) -> None:
         for _ in range(count):
