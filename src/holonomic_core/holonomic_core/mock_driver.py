@@ -28,6 +28,8 @@ class MockDriver(Driver):
         n = len(model.joint_names)
         self._positions = np.zeros(n)
         self._command = np.zeros(n)
+        self._no_efforts = np.full(n, np.nan)
+        self._no_efforts.flags.writeable = False
         self._last = 0.0
 
     def _on_configure(self) -> None:
@@ -42,8 +44,7 @@ class MockDriver(Driver):
         self._last = now
         velocities = self._command.copy() if self.armed else np.zeros_like(self._command)
         self._positions += velocities * dt
-        return JointReading(now, self._positions.copy(), velocities,
-                            np.full_like(velocities, np.nan))
+        return JointReading(now, self._positions.copy(), velocities, self._no_efforts)
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
         self._command[:] = np.clip(velocities, -self.model.max_joint_velocity,

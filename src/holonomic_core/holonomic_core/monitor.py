@@ -47,6 +47,8 @@ class ReadingMonitor:
         self.max_velocity = np.asarray(max_velocity, float)
         self.period = float(period)
         self.limits = limits
+        self._bound = limits.velocity_factor * self.max_velocity
+        self._tracking_bound = limits.tracking_error * self.max_velocity
         self.reset()
 
     def reset(self) -> None:
@@ -69,14 +71,16 @@ class ReadingMonitor:
         if positions.shape != (n,) or velocities.shape != (n,):
             return (f"driver returned {positions.shape[0] if positions.ndim else 0} positions and "
                     f"{velocities.shape[0] if velocities.ndim else 0} velocities for {n} joints")
-        for values, what in ((positions, "position"), (velocities, "velocity")):
-            bad = np.flatnonzero(~np.isfinite(values))
-            if bad.size:
-                return f"{self.joint_names[bad[0]]}: non-finite {what} reading ({values[bad[0]]})"
-        bound = self.limits.velocity_factor * self.max_velocity
-        over = np.flatnonzero(np.abs(velocities) > bound)
-        if over.size:
-            i = over[0]
+        # fast path first: one vectorised test per check, details on failure
+        if not (np.isfinite(positions).all() and np.isfinite(velocities).all()):
+            for values, what in ((positions, "position"), (velocities, "velocity")):
+                bad = np.flatnonzero(~np.isfinite(values))
+                if bad.size:
+                    return (f"{self.joint_names[bad[0]]}: non-finite {what} reading "
+                            f"({values[bad[0]]})")
+        bound = self._bound
+        if (np.abs(velocities) > bound).any():
+            i = int(np.argmax(np.abs(velocities) - bound))
             return (f"{self.joint_names[i]}: velocity reading {velocities[i]:.4g} rad/s is over "
                     f"{self.limits.velocity_factor:g}x its limit ({self.max_velocity[i]:g} rad/s): "
                     "encoder glitch")
@@ -88,9 +92,8 @@ class ReadingMonitor:
                 return None
             allowed = bound * max(dt, self.period) + 1e-6
             jump = np.abs(positions - self._last_positions)
-            over = np.flatnonzero(jump > allowed)
-            if over.size:
-                i = over[0]
+            if (jump > allowed).any():
+                i = int(np.argmax(jump - allowed))
                 return (f"{self.joint_names[i]}: position jumped by {jump[i]:.4g} rad in "
                         f"{dt:.4g} s: encoder glitch")
             if dt == 0.0:
@@ -111,9 +114,8 @@ class ReadingMonitor:
         if command is None or self.limits.tracking_timeout <= 0.0:
             self._tracking_since = None
             return None
-        error = np.abs(np.asarray(command, float) - velocities)
-        over = np.flatnonzero(error > self.limits.tracking_error * self.max_velocity)
-        if not over.size:
+        excess = np.abs(command - velocities) - self._tracking_bound
+        if not (excess > 0.0).any():
             self._tracking_since = None
             return None
         if self._tracking_since is None:
@@ -121,7 +123,7 @@ class ReadingMonitor:
             return None
         if now - self._tracking_since < self.limits.tracking_timeout:
             return None
-        i = over[0]
+        i = int(np.argmax(excess))
         return (f"{self.joint_names[i]}: cannot follow its command ({command[i]:.3g} rad/s "
                 f"commanded, {velocities[i]:.3g} rad/s measured for "
                 f"{now - self._tracking_since:.2f} s): motor saturated or blocked")
