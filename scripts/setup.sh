@@ -20,6 +20,12 @@ FORCE=0
 
 log() { printf 'setup: %s\n' "$*" >&2; }
 
+# One set-up at a time per checkout: two concurrent `make test` runs would
+# otherwise pip-install and colcon-build into the same folders.
+mkdir -p "$WS"
+exec 9>"$WS/.setup.lock"
+flock 9
+
 hash_of() { sha256sum "$@" | sha256sum | cut -d' ' -f1; }
 
 # -- 1. virtual environment ---------------------------------------------------
