@@ -187,10 +187,59 @@ def ddrot_urdf(model) -> str:
     return _robot(model.name, parts)
 
 
+# -- PCV -------------------------------------------------------------------------
+def pcv_base_height(model) -> float:
+    """Height [m] of base_link's origin (the chassis box's centre) above the floor."""
+    p = model.params
+    return float(model.kinematics.r.max()) + p["body.fork.height"] + p["body.chassis.height"] / 2
+
+
+def pcv_urdf(model) -> str:
+    """URDF of a powered-caster vehicle.
+
+    ``base_link`` (root) is the chassis box. Caster ``NAME``:
+    ``NAME_steer_joint`` (axis +z, at the steering axis on the chassis bottom)
+    carries ``NAME_fork``, whose x axis is the wheel's rolling heading;
+    ``NAME_wheel_joint`` (axis +y, positive rolls forward) sits ``b`` behind
+    the steering axis along the fork's -x and ``body.fork.height`` below the
+    chassis, carrying ``NAME_wheel``. Wheels of different radii hang from
+    forks of different lengths so that all contact points touch a flat floor.
+    The wheels are the only bodies that touch the floor.
+    """
+    k, p = model.kinematics, model.params
+    length, width, h_c = (p["body.chassis.length"], p["body.chassis.width"],
+                          p["body.chassis.height"])
+    m_c, m_f = p["body.chassis.mass"], p["body.fork.mass"]
+    m_w, w_w = p["body.wheel.mass"], p["body.wheel.width"]
+    height = pcv_base_height(model)
+    parts = ['<link name="base_link">' + _inertial(m_c, Inertia.box(m_c, length, width, h_c))
+             + _both(_box(length, width, h_c), material="body") + "</link>"]
+    for caster in k.casters:
+        r, b = caster.wheel_radius, caster.caster_offset
+        drop = height - h_c / 2 - r              # steering joint to wheel axle [m]
+        fork, wheel = f"{caster.name}_fork", f"{caster.name}_wheel"
+        arm = (max(b, 0.01), 0.01, drop)          # visual only: the fork must not touch
+        parts.append(f'<link name="{fork}">'
+                     + _inertial(m_f, Inertia.box(m_f, *arm), (-b / 2, 0, -drop / 2))
+                     + _shape("visual", _box(*arm), (-b / 2, 0, -drop / 2), material="top")
+                     + "</link>")
+        effort, velocity = _limits(model, caster.steer_joint)
+        x, y = caster.axis
+        parts.append(_joint(caster.steer_joint, "continuous", "base_link", fork,
+                            (x, y, -h_c / 2), (0, 0, 1), effort, velocity))
+        parts.append(f'<link name="{wheel}">' + _inertial(m_w, Inertia.cylinder_y(m_w, r, w_w))
+                     + _wheel_shapes(r, w_w) + "</link>")
+        effort, velocity = _limits(model, caster.wheel_joint)
+        parts.append(_joint(caster.wheel_joint, "continuous", fork, wheel,
+                            (-b, 0, -drop), (0, 1, 0), effort, velocity))
+    return _robot(model.name, parts)
+
+
 #: kinematic family -> (URDF generator, base height, links in contact with
 #: the floor that must be frictionless)
 GENERATORS = {
     "ddrot": (ddrot_urdf, ddrot_base_height, ("drive_base",)),
+    "pcv": (pcv_urdf, pcv_base_height, ()),
 }
 
 

@@ -1,0 +1,1 @@
+"""Powered-caster vehicles: kinematics and slip-minimising odometry."""

@@ -1,0 +1,462 @@
+"""Kinematics of a powered-caster vehicle (PCV): n >= 2 actively steered and
+driven offset casters (Holmberg & Khatib, "Development of a holonomic mobile
+robot for mobile manipulation tasks"; Nomadic XR4000, PR2, Kim & Moon's COMR).
+
+Geometry (frames per CONTRACT.md). Caster ``i`` has its steering axis at
+``s_i = h_i (cos beta_i, sin beta_i)`` in base_link, a wheel of radius ``r_i``
+whose ground contact trails the axis by the caster offset ``b_i > 0``, and two
+joints: ``<name>_steer_joint`` = phi_i, the wheel's rolling heading relative
+to base_link x (CCW positive), and ``<name>_wheel_joint`` = rho_i (positive
+rolls forward along that heading). With ``e_i = (cos phi_i, sin phi_i)`` and
+``n_i = (-sin phi_i, cos phi_i)`` the contact point is ``p_i = s_i - b_i e_i``.
+
+Derivation. A base twist ``x_dot = (vx, vy, wz)`` moves the base's point at
+``p`` with ``v(p) = (vx - wz p_y, vy + wz p_x)``. Relative to the base, the
+fork turns at phi_dot about ``s``, which moves its point at the contact by
+``-b phi_dot n``; the wheel rolls, which moves its material point at the
+contact by ``-r rho_dot e``. Ideal rolling (no slip) makes the wheel's contact
+point still on the floor::
+
+    v(p_i) = r_i rho_dot_i e_i + b_i phi_dot_i n_i                         (*)
+
+* ``C_p`` (2n x 3) maps the base twist to the contact velocities ``p_dot_i =
+  v(p_i)``: block ``[[1, 0, -p_iy], [0, 1, p_ix]]`` (the paper's eq. 11);
+* ``C_q`` (2n x 2n, block diagonal, invertible for b, r > 0) maps contact
+  velocities to joint rates ``q_dot_i = (phi_dot_i, rho_dot_i)``: by (*),
+  ``C_q_i^-1 = [b n | r e]`` and ``C_q_i = [[-sin phi / b, cos phi / b],
+  [cos phi / r, sin phi / r]]`` (eq. 10);
+* ``C = C_q C_p`` is the constraint matrix of eq. 7, which comes out exactly as
+  printed: ``phi_dot = (-s vx + c vy)/b + (h cos(beta - phi)/b - 1) wz`` and
+  ``rho_dot = (c vx + s vy)/r + h sin(phi - beta)/r wz``. The tests check the
+  printed form, the product, and a numeric differentiation of the rigid-body
+  motion against each other.
+
+Estimators of the twist from measured joint rates (``forward``):
+
+* ``slip_min``: the paper's ``C# = C_p^+ C_q^-1`` (eq. 13): map the joint rates
+  to sensed contact velocities with ``C_q^-1`` and fit the rigid-body velocity
+  field to them in the least-squares sense -- it minimises the total contact
+  slip, in m/s, the same for every wheel and both directions;
+* ``pinv``: the Moore-Penrose inverse of ``C``, for comparison: it fits joint
+  rates, which weighs lateral slip by 1/b^2 and rolling slip by 1/r^2;
+* ``robust``: iteratively reweighted least squares on the same contact-velocity
+  residuals (so it keeps C#'s weighting), with Cauchy weights per caster and
+  the best leave-one-caster-out fit as the starting point: a single wheel that
+  spins or skids is down-weighted instead of dragging the estimate (the idea of
+  the PR2 base odometry's IRLS, written for this model).
+
+The least-squares fit of a planar rigid velocity field has a closed form (its
+normal equations decouple about the weighted centroid of the contact points),
+so the estimators cost O(n) arithmetic with no matrix inversion per cycle.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from holonomic_core.kinematics import ESTIMATORS, BaseKinematics
+from holonomic_core.schema import ConfigError, ParamSpec
+
+#: scale [m/s] of the robust estimator's Cauchy weights: a caster whose
+#: contact velocity disagrees with the fit by this much counts half.
+ROBUST_SCALE = 0.02
+#: residual [m/s] beyond which the robust estimator ignores a caster
+ROBUST_REJECT = 0.1
+#: IRLS iterations of the robust estimator (it converges in 3-5)
+ROBUST_ITERATIONS = 8
+
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class Caster:
+    """Geometry of one powered caster.
+
+    ``h`` [m] and ``beta`` [rad]: the steering axis at (h cos beta, h sin beta)
+    in base_link; ``wheel_radius`` r [m] > 0; ``caster_offset`` b [m] > 0, the
+    horizontal distance by which the contact point trails the steering axis.
+    """
+
+    name: str
+    h: float
+    beta: float
+    wheel_radius: float
+    caster_offset: float
+
+    @property
+    def axis(self) -> tuple[float, float]:
+        """Steering axis position (x, y) [m] in base_link."""
+        return (self.h * math.cos(self.beta), self.h * math.sin(self.beta))
+
+    @property
+    def steer_joint(self) -> str:
+        return f"{self.name}_steer_joint"
+
+    @property
+    def wheel_joint(self) -> str:
+        return f"{self.name}_wheel_joint"
+
+
+def _rigid_fit(px, py, vx, vy, w):
+    """Weighted least-squares rigid velocity field through contact velocities.
+
+    Points ``(px, py)`` [m], velocities ``(vx, vy)`` [m/s], weights ``w`` >= 0
+    (arrays of n). Minimises sum w_i |v_i - (v0 + wz k x p_i)|^2 over the
+    twist (v0x, v0y, wz) of base_link's origin. About the weighted centroid
+    ``c`` the normal equations decouple: the translation there is the weighted
+    mean velocity and ``wz = sum w (q x v) / sum w |q|^2`` with ``q = p - c``.
+    """
+    sw = w.sum()
+    cx, cy = (w * px).sum() / sw, (w * py).sum() / sw
+    mx, my = (w * vx).sum() / sw, (w * vy).sum() / sw
+    qx, qy = px - cx, py - cy
+    den = (w * (qx * qx + qy * qy)).sum()
+    wz = (w * (qx * vy - qy * vx)).sum() / den if den > 1e-12 * sw else 0.0
+    return np.array([mx + wz * cy, my - wz * cx, wz])
+
+
+class PoweredCasterKinematics(BaseKinematics):
+    """Exact PCV kinematics with the three odometry estimators.
+
+    Joint order: ``(c1_steer, c1_wheel, c2_steer, c2_wheel, ...)`` in the
+    order of ``casters`` -- the paper's ``q'_i = (phi_dot_i, rho_dot_i)``.
+    """
+
+    kind = "pcv"
+
+    def __init__(self, casters: Sequence[Caster]):
+        """Validate the geometry; raise :class:`ConfigError` naming the key."""
+        casters = tuple(casters)
+        if len(casters) < 2:
+            raise ConfigError("pcv.casters", [c.name for c in casters],
+                              "at least 2 casters (one caster cannot hold a base's "
+                              "3 degrees of freedom)")
+        check_caster_names([c.name for c in casters])
+        for c in casters:
+            for key, value in (("wheel_radius", c.wheel_radius),
+                               ("caster_offset", c.caster_offset)):
+                if not (math.isfinite(value) and value > 0):
+                    extra = (" (b = 0 makes the caster a steered wheel that cannot move "
+                             "sideways without first turning: the base would not be "
+                             "holonomic)" if key == "caster_offset" else "")
+                    raise ConfigError(f"pcv.{c.name}.{key}", value, "a finite number > 0" + extra)
+            if not (math.isfinite(c.h) and c.h >= 0 and math.isfinite(c.beta)):
+                raise ConfigError(f"pcv.{c.name}.h", c.h, "a finite number >= 0")
+        # Two contact points that can coincide make C_p rank-deficient at some
+        # steering angles (and the wheels collide): the circles on which the
+        # contact points move must be apart.
+        for i, ci in enumerate(casters):
+            for cj in casters[i + 1:]:
+                dist = math.dist(ci.axis, cj.axis)
+                if dist <= ci.caster_offset + cj.caster_offset:
+                    raise ConfigError(
+                        f"pcv.{cj.name}.h", cj.h,
+                        f"a steering axis more than b_{ci.name} + b_{cj.name} = "
+                        f"{ci.caster_offset + cj.caster_offset:g} m from caster {ci.name}'s "
+                        f"(it is {dist:g} m: the steering axes (nearly) coincide)")
+        self.casters = casters
+        self._names = tuple(n for c in casters for n in (c.steer_joint, c.wheel_joint))
+        self.sx = np.array([c.axis[0] for c in casters])
+        self.sy = np.array([c.axis[1] for c in casters])
+        self.r = np.array([c.wheel_radius for c in casters])
+        self.b = np.array([c.caster_offset for c in casters])
+        self._ones = np.ones(len(casters))
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self._names
+
+    @property
+    def caster_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.casters)
+
+    @property
+    def steer_indices(self) -> slice:
+        """Slice of the steering joints in joint arrays."""
+        return slice(0, None, 2)
+
+    @property
+    def wheel_indices(self) -> slice:
+        """Slice of the wheel joints in joint arrays."""
+        return slice(1, None, 2)
+
+    # -- geometry at a configuration ----------------------------------------------
+    def contact_points(self, positions: np.ndarray) -> np.ndarray:
+        """Contact points p_i = s_i - b_i e_i (n x 2) [m] in base_link."""
+        phi = np.asarray(positions, float)[0::2]
+        return np.column_stack((self.sx - self.b * np.cos(phi), self.sy - self.b * np.sin(phi)))
+
+    def contact_jacobian(self, positions: np.ndarray) -> np.ndarray:
+        """``C_p`` (2n x 3): base twist -> contact-point velocities (eq. 11)."""
+        p = self.contact_points(positions)
+        n = len(self.casters)
+        cp = np.zeros((2 * n, 3))
+        cp[0::2, 0] = 1.0
+        cp[1::2, 1] = 1.0
+        cp[0::2, 2] = -p[:, 1]
+        cp[1::2, 2] = p[:, 0]
+        return cp
+
+    def joint_to_contact(self, positions: np.ndarray) -> np.ndarray:
+        """``C_q^-1`` (2n x 2n, block diagonal): joint rates -> sensed contact
+        velocities (eq. 10 inverted); block ``[b n | r e]`` per caster."""
+        phi = np.asarray(positions, float)[0::2]
+        c, s = np.cos(phi), np.sin(phi)
+        n = len(self.casters)
+        out = np.zeros((2 * n, 2 * n))
+        for i in range(n):
+            out[2 * i:2 * i + 2, 2 * i:2 * i + 2] = [[-self.b[i] * s[i], self.r[i] * c[i]],
+                                                     [self.b[i] * c[i], self.r[i] * s[i]]]
+        return out
+
+    def contact_to_joint(self, positions: np.ndarray) -> np.ndarray:
+        """``C_q`` (2n x 2n, block diagonal): contact velocities -> joint rates (eq. 10)."""
+        phi = np.asarray(positions, float)[0::2]
+        c, s = np.cos(phi), np.sin(phi)
+        n = len(self.casters)
+        out = np.zeros((2 * n, 2 * n))
+        for i in range(n):
+            out[2 * i:2 * i + 2, 2 * i:2 * i + 2] = [[-s[i] / self.b[i], c[i] / self.b[i]],
+                                                     [c[i] / self.r[i], s[i] / self.r[i]]]
+        return out
+
+    def constraint_matrix(self, positions: np.ndarray) -> np.ndarray:
+        """``C`` (2n x 3), eq. 7 as printed: rows (phi_dot_i, rho_dot_i) per caster."""
+        phi = np.asarray(positions, float)[0::2]
+        out = np.zeros((2 * len(self.casters), 3))
+        for i, cas in enumerate(self.casters):
+            sp, cp_ = math.sin(phi[i]), math.cos(phi[i])
+            sb, cb = math.sin(cas.beta), math.cos(cas.beta)
+            b, r, h = cas.caster_offset, cas.wheel_radius, cas.h
+            out[2 * i] = [-sp / b, cp_ / b, h * (cb * cp_ + sb * sp) / b - 1.0]
+            out[2 * i + 1] = [cp_ / r, sp / r, h * (cb * sp - sb * cp_) / r]
+        return out
+
+    # -- kinematics ---------------------------------------------------------------
+    def inverse(self, positions: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """Steering and wheel rates [rad/s] for body twist (vx, vy, wz) at the
+        current steering angles: ``C @ twist``, written per caster.
+
+        The steering rate is commanded directly (an offset caster is not a
+        swerve module): phi_dot = n . v(s) / b - wz, rho_dot = e . v(s) / r,
+        with v(s) the base's velocity at the steering axis.
+        """
+        phi = positions[0::2]
+        c, s = np.cos(phi), np.sin(phi)
+        vx, vy, wz = float(twist[0]), float(twist[1]), float(twist[2])
+        vsx = vx - wz * self.sy
+        vsy = vy + wz * self.sx
+        out = np.empty(2 * len(self.casters))
+        out[0::2] = (c * vsy - s * vsx) / self.b - wz
+        out[1::2] = (c * vsx + s * vsy) / self.r
+        return out
+
+    def _contact_velocities(self, positions, velocities):
+        """Contact points and the sensed contact velocities C_q^-1 q_dot (per caster)."""
+        phi = positions[0::2]
+        c, s = np.cos(phi), np.sin(phi)
+        dphi, drho = velocities[0::2], velocities[1::2]
+        px, py = self.sx - self.b * c, self.sy - self.b * s
+        vx = -self.b * s * dphi + self.r * c * drho
+        vy = self.b * c * dphi + self.r * s * drho
+        return px, py, vx, vy
+
+    def forward(self, positions: np.ndarray, velocities: np.ndarray,
+                estimator: str = "slip_min") -> np.ndarray:
+        """Body twist (vx, vy, wz) from joint rates with the chosen estimator."""
+        return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
+                              estimator)[0]
+
+    def fit_residual(self, positions: np.ndarray, velocities: np.ndarray,
+                     estimator: str = "slip_min") -> np.ndarray:
+        """Per caster, the norm [m/s] of the contact-velocity slip the chosen
+        estimator's twist does not explain (0 for consistent joint rates)."""
+        return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
+                              estimator)[1]
+
+    def _estimate(self, positions, velocities, estimator):
+        px, py, vx, vy = self._contact_velocities(positions, velocities)
+        if estimator == "slip_min":
+            twist = _rigid_fit(px, py, vx, vy, self._ones)
+        elif estimator == "pinv":
+            C = self.constraint_matrix(positions)
+            twist = np.linalg.lstsq(C, velocities, rcond=None)[0]
+        elif estimator == "robust":
+            twist = self._robust(px, py, vx, vy)
+        else:
+            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
+        return twist, self._residual(px, py, vx, vy, twist)
+
+    @staticmethod
+    def _residual(px, py, vx, vy, twist):
+        ex = vx - (twist[0] - twist[2] * py)
+        ey = vy - (twist[1] + twist[2] * px)
+        return np.hypot(ex, ey)
+
+    def _robust(self, px, py, vx, vy):
+        """IRLS with Cauchy weights on the per-caster contact residuals.
+
+        Start from the best of the full fit and the leave-one-out fits (with
+        3 or more casters; with 2, one caster's slip cannot be told from the
+        other's), judged by the Cauchy loss; then reweight. Residuals well
+        below ROBUST_SCALE keep weight ~1, so without slip this is C#.
+        """
+        n = len(px)
+        candidates = [_rigid_fit(px, py, vx, vy, self._ones)]
+        if n >= 3:
+            for i in range(n):
+                w = self._ones.copy()
+                w[i] = 0.0
+                candidates.append(_rigid_fit(px, py, vx, vy, w))
+
+        def loss(t):
+            res = self._residual(px, py, vx, vy, t) / ROBUST_SCALE
+            return float(np.log1p(res * res).sum())
+
+        twist = min(candidates, key=loss)
+        for _ in range(ROBUST_ITERATIONS):
+            res = self._residual(px, py, vx, vy, twist) / ROBUST_SCALE
+            w = 1.0 / (1.0 + res * res)
+            new = _rigid_fit(px, py, vx, vy, w)
+            converged = np.max(np.abs(new - twist)) < 1e-9
+            twist = new
+            if converged:
+                break
+        # Cauchy weights never reach zero: a wheel spinning at 1 m/s would
+        # still pull the fit by ~1 mm/s. Casters beyond ROBUST_REJECT are
+        # dropped outright, as long as two casters (four equations for three
+        # unknowns) remain.
+        res = self._residual(px, py, vx, vy, twist) / ROBUST_SCALE
+        outliers = res > ROBUST_REJECT / ROBUST_SCALE
+        if n >= 3 and outliers.any() and n - outliers.sum() >= 2:
+            w = 1.0 / (1.0 + res * res)
+            w[outliers] = 0.0
+            twist = _rigid_fit(px, py, vx, vy, w)
+        return twist
+
+    def jacobian(self, positions: np.ndarray) -> np.ndarray:
+        """``C# = C_p^+ C_q^-1`` (3 x 2n): the slip-minimising estimator (eq. 13)."""
+        positions = np.asarray(positions, float)
+        return np.linalg.pinv(self.contact_jacobian(positions)) @ self.joint_to_contact(positions)
+
+    def torque_distribution(self, positions: np.ndarray, force: np.ndarray) -> np.ndarray:
+        """Joint torques ``Gamma' = C#^T F`` [N m] (eq. 14) that produce the
+        base wrench ``F = (fx [N], fy [N], tz [N m])`` in base_link while
+        minimising the contact forces in the least-squares sense.
+
+        Dual of ``slip_min``: power balance ``Gamma'.q_dot = F.x_dot`` with
+        ``q_dot = C x_dot`` gives ``C^T Gamma' = F``, which C#^T satisfies
+        because C# C = I.
+        """
+        return self.jacobian(positions).T @ np.asarray(force, float)
+
+    # -- configuration ------------------------------------------------------------
+    @classmethod
+    def param_specs(cls, params: Mapping[str, object]) -> list[ParamSpec]:
+        specs = [
+            ParamSpec("pcv.casters", "string_array",
+                      "Caster names, in joint order; caster NAME has joints "
+                      "NAME_steer_joint and NAME_wheel_joint.", min_length=2),
+            ParamSpec("pcv.wheel_radius", "double",
+                      "Wheel radius r [m] of every caster (per-caster override: "
+                      "pcv.NAME.wheel_radius).", minimum=0.0, exclusive_minimum=True,
+                      maximum=10.0),
+            # minimum 0 inclusive: b = 0 reaches the constructor, whose error
+            # says why it is not allowed
+            ParamSpec("pcv.caster_offset", "double",
+                      "Caster offset b [m] of every caster: horizontal distance from the "
+                      "steering axis back to the wheel's contact point (per-caster "
+                      "override: pcv.NAME.caster_offset).", minimum=0.0, maximum=10.0),
+            ParamSpec("body.chassis.mass", "double", "Mass of the chassis with payload [kg].",
+                      default=60.0, minimum=0.0, exclusive_minimum=True, maximum=1e4),
+            ParamSpec("body.chassis.length", "double", "Chassis box length along x [m].",
+                      default=0.5, minimum=0.0, exclusive_minimum=True, maximum=100.0),
+            ParamSpec("body.chassis.width", "double", "Chassis box width along y [m].",
+                      default=0.5, minimum=0.0, exclusive_minimum=True, maximum=100.0),
+            ParamSpec("body.chassis.height", "double", "Chassis box height [m].",
+                      default=0.1, minimum=0.0, exclusive_minimum=True, maximum=100.0),
+            ParamSpec("body.fork.mass", "double", "Mass of one caster fork [kg].",
+                      default=0.8, minimum=0.0, exclusive_minimum=True, maximum=1e3),
+            ParamSpec("body.fork.height", "double",
+                      "Drop from the chassis bottom to the wheel axle [m].",
+                      default=0.04, minimum=0.0, exclusive_minimum=True, maximum=10.0),
+            ParamSpec("body.wheel.mass", "double", "Mass of one wheel [kg].",
+                      default=0.5, minimum=0.0, exclusive_minimum=True, maximum=1e3),
+            ParamSpec("body.wheel.width", "double", "Width of a wheel [m].",
+                      default=0.03, minimum=0.0, exclusive_minimum=True, maximum=10.0),
+        ]
+        names = params.get("pcv.casters")
+        if isinstance(names, (list, tuple)) and all(isinstance(n, str) for n in names):
+            check_caster_names(list(names))
+            shared_r = params.get("pcv.wheel_radius")
+            shared_b = params.get("pcv.caster_offset")
+            for name in names:
+                specs += [
+                    ParamSpec(f"pcv.{name}.h", "double",
+                              f"Distance [m] of caster {name}'s steering axis from the "
+                              "base_link origin.", minimum=0.0, maximum=100.0),
+                    ParamSpec(f"pcv.{name}.beta", "double",
+                              f"Direction [rad] of caster {name}'s steering axis from "
+                              "base_link x, CCW.", minimum=-10.0, maximum=10.0),
+                    ParamSpec(f"pcv.{name}.wheel_radius", "double",
+                              f"Wheel radius [m] of caster {name} (default pcv.wheel_radius).",
+                              default=_number_or_none(shared_r), minimum=0.0,
+                              exclusive_minimum=True, maximum=10.0),
+                    ParamSpec(f"pcv.{name}.caster_offset", "double",
+                              f"Caster offset [m] of caster {name} (default "
+                              "pcv.caster_offset).", default=_number_or_none(shared_b),
+                              minimum=0.0, maximum=10.0),
+                ]
+        return specs
+
+    @classmethod
+    def from_params(cls, values: Mapping[str, object]) -> "PoweredCasterKinematics":
+        if values["pcv.caster_offset"] <= 0:
+            raise ConfigError("pcv.caster_offset", values["pcv.caster_offset"],
+                              "a number > 0 (b = 0 makes the casters steered wheels that "
+                              "cannot move sideways without first turning: the base would "
+                              "not be holonomic)")
+        casters = [Caster(name, values[f"pcv.{name}.h"], values[f"pcv.{name}.beta"],
+                          values[f"pcv.{name}.wheel_radius"], values[f"pcv.{name}.caster_offset"])
+                   for name in values["pcv.casters"]]
+        kin = cls(casters)
+        # The wheels' swept discs (plan view: a 2r x w rectangle at distance b
+        # from the axis, turning about it) must not intersect (Holmberg &
+        # Khatib, Sec. 2), or the simulated and the real wheels collide.
+        w = values["body.wheel.width"]
+        swept = [math.hypot(c.caster_offset + c.wheel_radius, w / 2) for c in kin.casters]
+        for i, ci in enumerate(kin.casters):
+            for j in range(i + 1, len(kin.casters)):
+                cj = kin.casters[j]
+                dist = math.dist(ci.axis, cj.axis)
+                if dist <= swept[i] + swept[j]:
+                    raise ConfigError(f"pcv.{cj.name}.h", cj.h,
+                                      f"steering axes of {ci.name} and {cj.name} more than "
+                                      f"{swept[i] + swept[j]:.3f} m apart (the wheels' swept "
+                                      f"discs overlap at {dist:.3f} m)")
+        return kin
+
+
+def check_caster_names(names: list[str]) -> None:
+    """Caster names become joint names and parameter keys: valid and unique."""
+    for name in names:
+        if not _NAME.match(name):
+            raise ConfigError("pcv.casters", names,
+                              f"caster names usable in joint names ({name!r} is not: "
+                              "letters, digits, '_', starting with a letter)")
+        if names.count(name) > 1:
+            raise ConfigError("pcv.casters", names,
+                              f"unique caster names ({name!r} twice would duplicate "
+                              "the joint names)")
+
+
+def _number_or_none(value) -> float | None:
+    """A shared default for per-caster keys, or None (then they are required)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value)
