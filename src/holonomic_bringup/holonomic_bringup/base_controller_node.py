@@ -16,9 +16,7 @@ parameter overrides (``ros2 run ... --ros-args --params-file config/hamr.yaml``)
 from __future__ import annotations
 
 import math
-import signal
 import sys
-import threading
 import time
 
 import numpy as np
@@ -43,6 +41,8 @@ from holonomic_core.driver import DriverError
 from holonomic_core.loop import ControlLoop
 from holonomic_core.model import read_params_file, resolve_config
 from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_bringup.process_guard import (STOP, InstanceConflict, InstanceLock,
+                                             install_signal_handlers)
 
 NODE_NAME = "base_controller"
 #: parameters that are not part of the robot config
@@ -109,6 +109,16 @@ class BaseControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        # Before the driver exists: a second controller must not even open
+        # the motors' bus (raises InstanceConflict).
+        self._instance_lock = InstanceLock(self.get_fully_qualified_name())
+        try:
+            self._configure()
+        except BaseException:
+            self._instance_lock.release()
+            raise
+
+    def _configure(self) -> None:
         self.declare_parameter("robot_config", "", ParameterDescriptor(
             type=ParameterType.PARAMETER_STRING, read_only=True,
             description="Robot config: a name from config/ (hamr, xr4000, comr3) or a YAML "
@@ -174,7 +184,9 @@ class BaseControllerNode(Node):
     # -- ROS interfaces -------------------------------------------------------------
     def _make_interfaces(self) -> None:
         ctrl = self.config.controller
-        cmd_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        # Only the latest command matters: a queue of one, so that a flood of
+        # commands never builds a backlog (of memory or of stale motion).
+        cmd_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
         if ctrl.cmd_vel_stamped:
             self.create_subscription(TwistStamped, "cmd_vel", self._on_cmd_vel_stamped, cmd_qos)
         else:
@@ -379,30 +391,42 @@ class BaseControllerNode(Node):
         """Stop the loop, stop and disarm the motors, close the driver."""
         self.loop.stop()
         self.controller.shutdown()
+        self._instance_lock.release()
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the node until SIGINT/SIGTERM; exit 0 after stopping the motors.
 
-    Exit 2 with a one-line message on an invalid configuration.
+    Exit 2 with a one-line message on an invalid configuration, 3 when the
+    same controller already runs (same namespace and ROS domain).
     """
+    install_signal_handlers()   # before anything slow: a signal at any moment
+    # The control loop thread shares the GIL with the executor's callbacks. By
+    # default a thread that wants the GIL waits up to 5 ms -- a whole 200 Hz
+    # period -- while a flood of cmd_vel callbacks holds it; 0.5 ms bounds
+    # the loop's extra jitter at a tenth of a period.
+    sys.setswitchinterval(5e-4)
     argv = sys.argv if argv is None else argv
     # Our own signal handling: rclpy's would shut the context down before we
     # have stopped the motors.
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    if STOP.is_set():
+        rclpy.try_shutdown()
+        return 0
     try:
         node = BaseControllerNode()
     except ConfigError as exc:
         print(f"{NODE_NAME}: configuration error: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
+    except InstanceConflict as exc:
+        print(f"{NODE_NAME}: refusing to start: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 3
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
-        while not stop.is_set() and rclpy.ok():
+        while not STOP.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
     finally:
         node.shutdown()

@@ -13,10 +13,12 @@ import argparse
 import os
 import sys
 
-from holonomic_core.driver import DRIVER_REGISTRY
+from holonomic_bringup.process_guard import install_signal_handlers
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    from holonomic_core.driver import DRIVER_REGISTRY
+
     parser = argparse.ArgumentParser(
         prog="holonomic-bringup",
         description="Start the base controller, its driver (simulator or motor drives) "
@@ -61,6 +63,9 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # First: from here on SIGINT/SIGTERM request the normal shutdown (motors
+    # stopped and disarmed, exit 0), whatever is being set up when they come.
+    install_signal_handlers()
     args = parse_args(argv)
     # DDS must not multicast on the network interface unless the user asks for it.
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
