@@ -139,3 +139,16 @@ def test_low_friction_makes_the_wheels_slip():
     err_grip, err_ice = drive(1.0), drive(0.08)
     assert err_grip < 0.01
     assert err_ice > 5 * err_grip and err_ice > 0.02, (err_grip, err_ice)
+
+
+def test_tyre_radius_spread_changes_the_simulated_wheels_only():
+    from holonomic_core.schema import ConfigError
+    cfg = load_config("xr4000", {"sim.wheel_radius_spread": 0.02, "sim.seed": 5})
+    with SimDriver(cfg.model, cfg.values, 200.0) as driver:
+        radii = np.array(driver.wheel_radii)
+        assert np.all(np.abs(radii / 0.055 - 1.0) <= 0.02) and np.ptp(radii) > 1e-4
+        assert "simulated_wheel_radii" in driver.status()
+    assert cfg.model.kinematics.r == pytest.approx([0.055] * 4)     # the controller's model
+    hamr = load_config("hamr", {"sim.wheel_radius_spread": 0.02})
+    with pytest.raises(ConfigError, match="sim.wheel_radius_spread"):
+        SimDriver(hamr.model, hamr.values, 200.0).configure()

@@ -33,6 +33,7 @@ import numpy as np
 from holonomic_core.controller import BaseController, load_config
 from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.odometry import Odometry, wrap_angle
+from holonomic_core.schema import ConfigError
 
 #: slip conditions: name -> simulator overrides (per-wheel friction spread is
 #: re-drawn from each trial's seed)
@@ -40,6 +41,8 @@ CONDITIONS = {
     "nominal (mu 1.0)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0},
     "uneven (mu 0.8 +-40 %)": {"sim.wheel_friction": 0.8, "sim.friction_spread": 0.4},
     "slippery (mu 0.3 +-30 %)": {"sim.wheel_friction": 0.3, "sim.friction_spread": 0.3},
+    "worn tyres (r +-2 %)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0,
+                             "sim.wheel_radius_spread": 0.02},
 }
 
 
@@ -177,8 +180,12 @@ def main(argv: list[str] | None = None) -> int:
     trials = []
     for condition in args.condition or list(CONDITIONS):
         for seed in range(args.seeds):
-            trial = run_trial(args.robot, condition, seed, args.duration,
-                              speed=args.speed, acceleration=args.acceleration)
+            try:
+                trial = run_trial(args.robot, condition, seed, args.duration,
+                                  speed=args.speed, acceleration=args.acceleration)
+            except ConfigError as exc:      # e.g. per-wheel radii on a DDROT
+                print(f"{condition}: skipped for {args.robot} ({exc})", file=sys.stderr)
+                break
             trials.append(trial)
             errs = "  ".join(f"{e} {trial.position_error[e] * 1000:6.1f}mm" for e in ESTIMATORS)
             print(f"{condition:26s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "

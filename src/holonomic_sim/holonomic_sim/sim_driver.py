@@ -58,6 +58,8 @@ class SimDriver(Driver):
         self.physics_rate = rate
         self._world = None
         self._robot = None
+        #: simulated wheel radii [m] when sim.wheel_radius_spread > 0
+        self.wheel_radii: list[float] | None = None
 
     @classmethod
     def param_specs(cls, model) -> list[ParamSpec]:
@@ -72,7 +74,13 @@ class SimDriver(Driver):
                       "Relative spread of each wheel's friction around wheel_friction: "
                       "mu_i = mu (1 + spread u_i), u_i uniform in [-1, 1] [-].",
                       default=0.0, minimum=0.0, maximum=0.9),
-            ParamSpec("sim.seed", "int", "Seed of the per-wheel friction spread.",
+            ParamSpec("sim.wheel_radius_spread", "double",
+                      "Relative error of each simulated wheel's radius against the config "
+                      "(worn or unevenly inflated tyres): r_i = r (1 + spread u_i), u_i "
+                      "uniform in [-1, 1]; the controller keeps the nominal radius. Casters "
+                      "only (a DDROT config has one radius for both wheels) [-].",
+                      default=0.0, minimum=0.0, maximum=0.2),
+            ParamSpec("sim.seed", "int", "Seed of the per-wheel friction and radius spreads.",
                       default=0, minimum=0, maximum=2 ** 31 - 1),
             ParamSpec("sim.gui", "bool", "Open the pybullet GUI (needs a display).",
                       default=False),
@@ -94,6 +102,7 @@ class SimDriver(Driver):
         rng = np.random.default_rng(p["sim.seed"])
         friction = p["sim.wheel_friction"] * (
             1.0 + p["sim.friction_spread"] * rng.uniform(-1.0, 1.0, n_wheels))
+        body_model = self._body_model(rng)
         try:
             if self._shared_world is not None:
                 if abs(self._shared_world.dt * self.physics_rate - 1.0) > 1e-9:
@@ -102,7 +111,7 @@ class SimDriver(Driver):
                 self._world = self._shared_world
             else:
                 self._world = SimWorld(self.physics_rate, gui=p["sim.gui"])
-            self._robot = self._world.add_robot(self.model, Pose2D(*start), friction)
+            self._robot = self._world.add_robot(body_model, Pose2D(*start), friction)
         except SimError as exc:
             if self._world is not None and self._shared_world is None:
                 self._world.close()
@@ -110,6 +119,26 @@ class SimDriver(Driver):
         if self._shared_world is None:
             self._world.settle()      # odom = where base_link rests once settled
         self.friction = friction
+
+    def _body_model(self, rng: np.random.Generator):
+        """The model the simulated body is built from: the controller's, or
+        with per-wheel radius errors (``sim.wheel_radius_spread``), which the
+        controller does not know about -- the actuator conflict and slip of
+        real, imperfect tyres."""
+        spread = self.params["sim.wheel_radius_spread"]
+        if spread == 0.0:
+            return self.model
+        casters = getattr(self.model.kinematics, "casters", None)
+        if casters is None:
+            raise ConfigError("sim.wheel_radius_spread", spread,
+                              f"0 for kinematics '{self.model.kind}' (one radius for all wheels)")
+        from holonomic_core.model import build_model
+
+        flat = dict(self.model.params)
+        for caster, u in zip(casters, rng.uniform(-1.0, 1.0, len(casters))):
+            flat[f"pcv.{caster.name}.wheel_radius"] = caster.wheel_radius * (1.0 + spread * u)
+        self.wheel_radii = [flat[f"pcv.{c.name}.wheel_radius"] for c in casters]
+        return build_model(flat)[0]
 
     def _on_activate(self) -> None:
         self._robot.command_velocities(np.zeros(len(self.model.joint_names)))
@@ -155,6 +184,8 @@ class SimDriver(Driver):
         values = super().status()
         values.update({"physics_rate_hz": f"{self.physics_rate:g}",
                        "substeps": str(self.substeps)})
+        if self.wheel_radii:
+            values["simulated_wheel_radii"] = " ".join(f"{r:.5f}" for r in self.wheel_radii)
         if self._world is not None:
             values["sim_time_s"] = f"{self._world.time:.3f}"
             values["wheel_friction"] = " ".join(f"{mu:.3f}" for mu in self.friction)
