@@ -10,12 +10,17 @@ from holonomic_core.model import resolve_config
 from holonomic_core.schema import ConfigError
 
 HAMR = resolve_config("hamr").read_text()
+XR4000 = resolve_config("xr4000").read_text()
 
 
-def mutate(pattern: str, replacement: str) -> str:
-    text, count = re.subn(pattern, replacement, HAMR, count=1, flags=re.MULTILINE)
-    assert count == 1, f"pattern {pattern!r} not in hamr.yaml"
+def mutate(pattern: str, replacement: str, base: str = HAMR) -> str:
+    text, count = re.subn(pattern, replacement, base, count=1, flags=re.MULTILINE)
+    assert count == 1, f"pattern {pattern!r} not in the config"
     return text
+
+
+def mutate_xr(pattern: str, replacement: str) -> str:
+    return mutate(pattern, replacement, XR4000)
 
 
 # (case, YAML text, key the message must name, words of what is allowed)
@@ -51,6 +56,23 @@ CASES = [
     ("wrong node name", HAMR.replace("base_controller:", "controller:", 1),
      "robot", "base_controller: ros__parameters"),
     ("not YAML", HAMR + "\n  : - : [\n", "robot", "valid YAML"),
+    # powered-caster vehicles
+    ("zero caster offset", mutate_xr(r"caster_offset: 0.02", "caster_offset: 0.0"),
+     "pcv.caster_offset", "not be holonomic"),
+    ("duplicate caster names (duplicate joint names)",
+     mutate_xr(r"casters: \[front_left, rear_left,", "casters: [front_left, front_left,"),
+     "pcv.casters", "unique caster names"),
+    ("one caster", mutate_xr(r"casters: \[.*\]", "casters: [front_left]"),
+     "pcv.casters", "at least 2"),
+    ("coincident steering axes",
+     mutate_xr(r"rear_left: \{h: 0.240416, beta: 2.356194\}",
+               "rear_left: {h: 0.240416, beta: 0.785398}"),
+     "pcv.rear_left.h", "coincide"),
+    ("caster without its geometry", mutate_xr(r"^\s*rear_right: \{h: .*\n", ""),
+     "pcv.rear_right.h", "required"),
+    ("missing joint limit of a caster",
+     mutate_xr(r"^\s*rear_left_steer_joint: .*\n", ""),
+     "joints.rear_left_steer_joint.max_velocity", "required"),
 ]
 
 
@@ -66,7 +88,7 @@ def test_invalid_yaml_is_rejected_naming_the_key(tmp_path, case, text, key, allo
     assert allowed in str(err.value)
 
 
-@pytest.mark.parametrize("index", [1, 3, 9, 13], ids=lambda i: CASES[i][0])
+@pytest.mark.parametrize("index", [1, 3, 9, 13, 17, 18], ids=lambda i: CASES[i][0])
 def test_bringup_exits_2_with_one_line_naming_the_key(start_bringup, tmp_path, index):
     case, text, key, allowed = CASES[index]
     path = tmp_path / "robot.yaml"
