@@ -2,7 +2,6 @@
 base controller node and topics as the HAMR, the kinematics chosen by the
 robot config (holonomic-bringup xr4000 / comr3)."""
 
-import math
 import signal
 import time
 
@@ -11,7 +10,7 @@ import pytest
 from sensor_msgs.msg import JointState
 
 from holonomic_core.model import load_model
-from ros_probe import Bringup, Probe, relative_pose, wait_until
+from ros_probe import Bringup, Probe, drive_script, wait_until
 
 
 @pytest.fixture(scope="module", params=["xr4000", "comr3"])
@@ -55,22 +54,13 @@ def test_base_follows_the_commanded_twist_after_the_casters_turned(pcv, name):
 
 
 def test_odometry_tracks_ground_truth(pcv):
-    pcv.wait_at_rest()
-    odom0, truth0 = pcv.latest_odom().pose, pcv.latest_truth().pose
     script = [((0.6, 0.0, 0.0), 2.0), ((0.0, 0.5, 0.0), 2.0), ((0.3, 0.3, 0.8), 3.0),
               ((0.0, 0.0, -1.5), 1.5), ((-0.4, 0.2, 0.0), 2.5)]
-    t0 = time.monotonic()
-    for twist, seconds in script:
-        pcv.drive(twist, seconds)
-    pcv.wait_at_rest()
-    truth = pcv.truth_since(t0)
-    distance = sum(np.linalg.norm(b.pose[:2] - a.pose[:2]) for a, b in zip(truth, truth[1:]))
-    moved_odom = relative_pose(odom0, pcv.latest_odom().pose)
-    moved_truth = relative_pose(truth0, pcv.latest_truth().pose)
-    error = np.linalg.norm(moved_odom[:2] - moved_truth[:2])
+    distance, error, heading = drive_script(pcv, script)
     assert distance > 4.0
     assert error <= 0.02 * distance, (error, distance)
-    assert abs(math.remainder(moved_odom[2] - moved_truth[2], 2 * math.pi)) < 0.05
+    assert heading < 0.05
+
 
 
 def test_joint_states_and_per_caster_slip_in_diagnostics(pcv, ros):

@@ -109,13 +109,12 @@ class BaseControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        # Before the driver exists: a second controller must not even open
-        # the motors' bus (raises InstanceConflict).
-        self._instance_lock = InstanceLock(self.get_fully_qualified_name())
+        self._instance_lock: InstanceLock | None = None
         try:
             self._configure()
         except BaseException:
-            self._instance_lock.release()
+            if self._instance_lock is not None:
+                self._instance_lock.release()
             raise
 
     def _configure(self) -> None:
@@ -126,6 +125,11 @@ class BaseControllerNode(Node):
         self.config = self._load_config()
         model, ctrl = self.config.model, self.config.controller
         self._declare_config_parameters()
+
+        # After the configuration is known valid (a bad config says so, exit
+        # 2) and before the driver exists: a second controller must not even
+        # open the motors' bus (raises InstanceConflict).
+        self._instance_lock = InstanceLock(self.get_fully_qualified_name())
 
         # driver + core
         self.driver = self.config.driver_class(model, self.config.values, ctrl.control_rate)
@@ -391,7 +395,8 @@ class BaseControllerNode(Node):
         """Stop the loop, stop and disarm the motors, close the driver."""
         self.loop.stop()
         self.controller.shutdown()
-        self._instance_lock.release()
+        if self._instance_lock is not None:
+            self._instance_lock.release()
 
 
 def main(argv: list[str] | None = None) -> int:
