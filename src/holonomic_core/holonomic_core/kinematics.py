@@ -68,6 +68,14 @@ class BaseKinematics(abc.ABC):
         """
         return np.zeros(0)
 
+    def estimate(self, positions: np.ndarray, velocities: np.ndarray,
+                 estimator: str = "slip_min") -> tuple[np.ndarray, np.ndarray]:
+        """``(forward(...), fit_residual(...))`` in one call: the odometry
+        needs both every cycle, and a family whose fit is not trivial (the
+        PCV) computes them together."""
+        return (self.forward(positions, velocities, estimator),
+                self.fit_residual(positions, velocities, estimator))
+
     @classmethod
     @abc.abstractmethod
     def param_specs(cls, params: Mapping[str, object]) -> list[ParamSpec]:

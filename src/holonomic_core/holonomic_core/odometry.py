@@ -120,10 +120,12 @@ class Odometry:
             return False
         dq = positions - self._last_positions
         mid = self._last_positions + 0.5 * dq
-        disp = self.model.forward(mid, dq, self.estimator)
+        # One fit of the displacement gives both; the fit is linear in the
+        # joint motion, so the residual of dq over dt is the rate residual.
+        disp, residual = self.model.kinematics.estimate(mid, dq, self.estimator)
         dt = stamp - self._last_stamp
         if dt > 0.0:
-            self._update_slip(self.model.kinematics.fit_residual(mid, dq / dt, self.estimator))
+            self._update_slip(residual / dt)
         self._integrate(disp)
         if dt > 0.0:
             self.twist = disp / dt

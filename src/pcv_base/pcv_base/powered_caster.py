@@ -65,6 +65,10 @@ from holonomic_core.schema import ConfigError, ParamSpec
 #: scale [m/s] of the robust estimator's Cauchy weights: a caster whose
 #: contact velocity disagrees with the fit by this much counts half.
 ROBUST_SCALE = 0.02
+#: why the caster offset must be > 0, for the error messages
+_ZERO_OFFSET = ("b = 0 makes a caster a steered wheel that cannot move sideways without "
+                "first turning: the base would not be holonomic")
+
 #: residual [m/s] beyond which the robust estimator ignores a caster
 ROBUST_REJECT = 0.1
 #: IRLS iterations of the robust estimator (it converges in 3-5)
@@ -141,9 +145,7 @@ class PoweredCasterKinematics(BaseKinematics):
             for key, value in (("wheel_radius", c.wheel_radius),
                                ("caster_offset", c.caster_offset)):
                 if not (math.isfinite(value) and value > 0):
-                    extra = (" (b = 0 makes the caster a steered wheel that cannot move "
-                             "sideways without first turning: the base would not be "
-                             "holonomic)" if key == "caster_offset" else "")
+                    extra = f" ({_ZERO_OFFSET})" if key == "caster_offset" else ""
                     raise ConfigError(f"pcv.{c.name}.{key}", value, "a finite number > 0" + extra)
             if not (math.isfinite(c.h) and c.h >= 0 and math.isfinite(c.beta)):
                 raise ConfigError(f"pcv.{c.name}.h", c.h, "a finite number >= 0")
@@ -278,6 +280,12 @@ class PoweredCasterKinematics(BaseKinematics):
         estimator's twist does not explain (0 for consistent joint rates)."""
         return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
                               estimator)[1]
+
+    def estimate(self, positions: np.ndarray, velocities: np.ndarray,
+                 estimator: str = "slip_min") -> tuple[np.ndarray, np.ndarray]:
+        """Twist and per-caster residual from one fit (see BaseKinematics)."""
+        return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
+                              estimator)
 
     def _estimate(self, positions, velocities, estimator):
         px, py, vx, vy = self._contact_velocities(positions, velocities)
@@ -418,9 +426,7 @@ class PoweredCasterKinematics(BaseKinematics):
     def from_params(cls, values: Mapping[str, object]) -> "PoweredCasterKinematics":
         if values["pcv.caster_offset"] <= 0:
             raise ConfigError("pcv.caster_offset", values["pcv.caster_offset"],
-                              "a number > 0 (b = 0 makes the casters steered wheels that "
-                              "cannot move sideways without first turning: the base would "
-                              "not be holonomic)")
+                              f"a number > 0 ({_ZERO_OFFSET})")
         casters = [Caster(name, values[f"pcv.{name}.h"], values[f"pcv.{name}.beta"],
                           values[f"pcv.{name}.wheel_radius"], values[f"pcv.{name}.caster_offset"])
                    for name in values["pcv.casters"]]
