@@ -404,7 +404,10 @@ class BaseController:
 
     def _on_fault(self, exc: DriverError) -> None:
         self.counters["driver_errors"] += 1
-        self.fault = str(exc)
+        # The first failure is the cause; what follows while disarmed (the
+        # same device still silent, ...) is its consequence.
+        if self.fault is None:
+            self.fault = str(exc)
         self.twist_command = np.zeros(3)
         self.joint_command[:] = 0.0
         try:

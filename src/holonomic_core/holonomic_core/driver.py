@@ -233,6 +233,8 @@ class Driver(abc.ABC):
 DRIVER_REGISTRY: dict[str, str] = {
     "sim": "holonomic_sim.sim_driver:SimDriver",
     "mock": "holonomic_core.mock_driver:MockDriver",
+    "odrive_can": "holonomic_drivers.odrive_can:OdriveCanDriver",
+    "cia402": "holonomic_drivers.cia402:Cia402Driver",
 }
 
 

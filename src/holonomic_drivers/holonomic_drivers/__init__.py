@@ -1,0 +1,1 @@
+"""Motor drive backends over CAN and their emulators (see README.md)."""

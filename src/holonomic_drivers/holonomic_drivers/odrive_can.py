@@ -1,0 +1,343 @@
+"""The ``odrive_can`` backend: ODrive motor controllers over CANSimple.
+
+One ODrive axis per joint, addressed by its CAN node id. The driver sends
+velocity (or torque) setpoints every cycle and takes positions and speeds
+from the encoder estimates that each axis broadcasts (``encoder_msg_rate_ms``
+on the ODrive, 10 ms by default) or, with ``odrive_can.poll_encoders``,
+answers to a remote request sent every cycle.
+
+Safety logic (all checks run in ``read``, i.e. every control cycle):
+
+* a missing heartbeat (``heartbeat_timeout``) or encoder stream
+  (``feedback_timeout``: the axis answers late) -> DriverCommunicationError;
+* while armed, an axis error or an axis that left closed-loop control ->
+  DriverFault. The controller then calls ``deactivate``, which sends every
+  axis a zero velocity and IDLE in the same cycle;
+* while disarmed a latched axis error is only reported (``status``); arming
+  sends Clear_Errors and refuses, naming the axis, if the error does not
+  clear or the axis does not reach closed-loop control within
+  ``startup_timeout``.
+
+The bus is drained without blocking at the start of every ``read`` (no
+receive thread): what the drives sent before the cycle is what the cycle
+sees. Frames that cannot be decoded are ignored and counted.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from holonomic_core.driver import (Driver, DriverCommunicationError, DriverFault, JointReading)
+from holonomic_core.schema import ParamSpec
+from holonomic_drivers import odrive_protocol as proto
+from holonomic_drivers.can_link import JointMap, bus_specs, joint_map_specs, open_bus
+from holonomic_drivers.odrive_protocol import AxisState, Cmd, ControlMode, InputMode
+
+PREFIX = "odrive_can"
+#: frames handled per read at most: a flooded bus cannot stall the loop
+MAX_FRAMES_PER_READ = 2000
+_INPUT_MODES = {"passthrough": InputMode.PASSTHROUGH, "vel_ramp": InputMode.VEL_RAMP}
+
+
+@dataclass
+class _Axis:
+    """What the driver last heard from one axis (times on the driver clock)."""
+
+    heartbeat: proto.Heartbeat | None = None
+    heartbeat_time: float = -math.inf
+    heartbeats: int = 0
+    position_rev: float = math.nan
+    velocity_rev_per_s: float = math.nan
+    estimate_time: float = -math.inf
+
+
+class OdriveCanDriver(Driver):
+    name = "odrive_can"
+    supports_effort = True
+
+    def __init__(self, model, params, control_rate: float,
+                 clock: Callable[[], float] = time.monotonic):
+        """``clock`` [s]: monotonic time of heartbeats and readings (injectable for tests)."""
+        super().__init__(model, params, control_rate)
+        self._clock = clock
+        self.joints = JointMap.from_params(PREFIX, model.joint_names, params)
+        self._index = {node: i for i, node in enumerate(self.joints.node_ids)}
+        self._axes = [_Axis() for _ in self.joints.node_ids]
+        self._heartbeat_timeout = float(params[f"{PREFIX}.heartbeat_timeout"])
+        self._feedback_timeout = float(params[f"{PREFIX}.feedback_timeout"])
+        self._startup_timeout = float(params[f"{PREFIX}.startup_timeout"])
+        self._input_mode = _INPUT_MODES[params[f"{PREFIX}.input_mode"]]
+        self._poll = bool(params[f"{PREFIX}.poll_encoders"])
+        self._control_mode = ControlMode.VELOCITY_CONTROL
+        self._bus = None
+        self.counters = {"bad_frames": 0, "foreign_frames": 0, "error_frames": 0,
+                         "frames_received": 0, "frames_sent": 0}
+        self._no_efforts = np.full(len(self._axes), np.nan)
+        self._no_efforts.flags.writeable = False
+
+    @classmethod
+    def param_specs(cls, model) -> list[ParamSpec]:
+        return bus_specs(PREFIX) + [
+            ParamSpec(f"{PREFIX}.heartbeat_timeout", "double",
+                      "An axis whose heartbeat is older than this is lost: fault and stop "
+                      "[s] (ODrive heartbeat_msg_rate_ms is 100 ms by default).",
+                      default=0.25, minimum=0.005, maximum=10.0),
+            ParamSpec(f"{PREFIX}.feedback_timeout", "double",
+                      "Encoder estimates older than this are late: fault and stop [s] "
+                      "(encoder_msg_rate_ms is 10 ms by default).",
+                      default=0.05, minimum=0.002, maximum=10.0),
+            ParamSpec(f"{PREFIX}.startup_timeout", "double",
+                      "How long configure waits for every axis to be heard, and arming "
+                      "for every axis to reach closed-loop control [s].",
+                      default=2.0, minimum=0.05, maximum=60.0),
+            ParamSpec(f"{PREFIX}.input_mode", "string",
+                      "ODrive input mode: passthrough (the controller already limits "
+                      "acceleration) or vel_ramp (the ODrive's own ramp on top).",
+                      default="passthrough", choices=tuple(_INPUT_MODES)),
+            ParamSpec(f"{PREFIX}.poll_encoders", "bool",
+                      "Request the encoder estimates every cycle (remote frame) instead of "
+                      "relying on the axes' cyclic messages.", default=False),
+        ] + joint_map_specs(PREFIX, model.joint_names, (0, proto.MAX_NODE_ID))
+
+    # -- lifecycle hooks ----------------------------------------------------------
+    def _on_configure(self) -> None:
+        self._bus = open_bus(PREFIX, self.params)
+        try:
+            # waits are on the wall clock, whatever clock stamps the readings
+            deadline = time.monotonic() + self._startup_timeout
+            while True:
+                self._drain()
+                missing = [i for i, a in enumerate(self._axes)
+                           if a.heartbeat is None or math.isinf(a.estimate_time)]
+                if not missing:
+                    break
+                if time.monotonic() > deadline:
+                    i = missing[0]
+                    what = ("no heartbeat" if self._axes[i].heartbeat is None
+                            else "no encoder estimates")
+                    raise DriverCommunicationError(
+                        f"{what} within {self._startup_timeout:g} s (is it powered, on "
+                        f"this bus, with this node id and bit rate?)",
+                        self.joints.device(i, "ODrive"))
+                if self._poll:
+                    self._request_estimates()
+                time.sleep(0.002)
+            # Velocity control, idle: nothing moves until activate.
+            for node in self.joints.node_ids:
+                self._send(node, Cmd.SET_CONTROLLER_MODE, proto.set_controller_mode(
+                    ControlMode.VELOCITY_CONTROL, self._input_mode))
+                self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
+                self._send(node, Cmd.SET_AXIS_STATE, proto.set_axis_state(AxisState.IDLE))
+            self._control_mode = ControlMode.VELOCITY_CONTROL
+        except BaseException:
+            self._shutdown_bus()
+            raise
+
+    def _on_activate(self) -> None:
+        # only heartbeats sent after the request count
+        seen = [a.heartbeats for a in self._axes]
+        for node in self.joints.node_ids:
+            self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors())
+            self._send(node, Cmd.SET_CONTROLLER_MODE, proto.set_controller_mode(
+                ControlMode.VELOCITY_CONTROL, self._input_mode))
+            self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
+            self._send(node, Cmd.SET_AXIS_STATE,
+                       proto.set_axis_state(AxisState.CLOSED_LOOP_CONTROL))
+        self._control_mode = ControlMode.VELOCITY_CONTROL
+        deadline = time.monotonic() + self._startup_timeout
+        while True:
+            self._drain()
+            waiting = [i for i, a in enumerate(self._axes) if not (
+                a.heartbeats > seen[i] and a.heartbeat.axis_error == 0
+                and a.heartbeat.axis_state == AxisState.CLOSED_LOOP_CONTROL)]
+            if not waiting:
+                return
+            # an axis that still reports an error after Clear_Errors will not
+            # arm: say so now rather than at the timeout
+            faulty = [i for i in waiting if self._axes[i].heartbeats > seen[i]
+                      and self._axes[i].heartbeat.axis_error]
+            if faulty or time.monotonic() > deadline:
+                self._idle_all()
+                i = (faulty or waiting)[0]
+                hb = self._axes[i].heartbeat
+                why = ("no heartbeat since the request" if self._axes[i].heartbeats == seen[i]
+                       else f"state {_state_name(hb.axis_state)}, error "
+                            f"0x{hb.axis_error:X} ({proto.error_names(hb.axis_error)})")
+                raise DriverFault(f"did not enter closed-loop control ({why}); motors left idle",
+                                  self.joints.device(i, "ODrive"))
+            time.sleep(0.002)
+
+    def _on_deactivate(self) -> None:
+        self._idle_all()
+
+    def _on_close(self) -> None:
+        self._shutdown_bus()
+
+    # -- cycle ------------------------------------------------------------------------
+    def _on_read(self) -> JointReading:
+        now = self._drain()
+        positions = np.empty(len(self._axes))
+        velocities = np.empty(len(self._axes))
+        armed = self.armed
+        for i, axis in enumerate(self._axes):
+            device = self.joints.device(i, "ODrive")
+            age = now - axis.heartbeat_time
+            if age > self._heartbeat_timeout:
+                raise DriverCommunicationError(
+                    f"no heartbeat for {age * 1e3:.0f} ms (limit "
+                    f"{self._heartbeat_timeout * 1e3:.0f} ms)", device)
+            age = now - axis.estimate_time
+            if age > self._feedback_timeout:
+                raise DriverCommunicationError(
+                    f"encoder estimates late: last one {age * 1e3:.0f} ms ago (limit "
+                    f"{self._feedback_timeout * 1e3:.0f} ms)", device)
+            hb = axis.heartbeat
+            if armed and hb.axis_error:
+                raise DriverFault(f"axis error 0x{hb.axis_error:X} "
+                                  f"({proto.error_names(hb.axis_error)})", device)
+            if armed and hb.axis_state != AxisState.CLOSED_LOOP_CONTROL:
+                raise DriverFault(f"left closed-loop control (now "
+                                  f"{_state_name(hb.axis_state)})", device)
+            # Each axis sends its estimates on its own schedule: bring them
+            # to one instant with the axis's own speed estimate, or a cycle
+            # in which only some axes were heard would see the base twist.
+            positions[i] = axis.position_rev + axis.velocity_rev_per_s * (now - axis.estimate_time)
+            velocities[i] = axis.velocity_rev_per_s
+        return JointReading(now, self.joints.to_joint_positions(positions),
+                            self.joints.to_joint_velocities(velocities), self._no_efforts)
+
+    def _on_write_velocities(self, velocities: np.ndarray) -> None:
+        if self._control_mode is not ControlMode.VELOCITY_CONTROL:
+            self._set_mode(ControlMode.VELOCITY_CONTROL, self._input_mode)
+        motor = self.joints.to_motor_velocities(np.asarray(velocities, float))
+        for node, value in zip(self.joints.node_ids, motor):
+            self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(float(value)))
+        if self._poll:
+            self._request_estimates()
+
+    def _on_write_efforts(self, efforts: np.ndarray) -> None:
+        if self._control_mode is not ControlMode.TORQUE_CONTROL:
+            self._set_mode(ControlMode.TORQUE_CONTROL, InputMode.PASSTHROUGH)
+        motor = self.joints.to_motor_torques(np.asarray(efforts, float))
+        for node, value in zip(self.joints.node_ids, motor):
+            self._send(node, Cmd.SET_INPUT_TORQUE, proto.set_input_torque(float(value)))
+        if self._poll:
+            self._request_estimates()
+
+    def status(self) -> dict[str, str]:
+        out = super().status()
+        out["bus"] = f"{self.params[f'{PREFIX}.interface']}:{self.params[f'{PREFIX}.channel']}"
+        out.update({k: str(v) for k, v in self.counters.items()})
+        now = self._clock()
+        for i, axis in enumerate(self._axes):
+            hb = axis.heartbeat
+            out[self.joints.joint_names[i]] = (
+                f"node {self.joints.node_ids[i]}: no heartbeat" if hb is None else
+                f"node {self.joints.node_ids[i]}: {_state_name(hb.axis_state)}, error "
+                f"{proto.error_names(hb.axis_error)}, heartbeat "
+                f"{(now - axis.heartbeat_time) * 1e3:.0f} ms ago")
+        return out
+
+    # -- bus ------------------------------------------------------------------------------
+    def _drain(self) -> float:
+        """Take every waiting frame off the bus; returns the clock after it."""
+        import can
+
+        now = self._clock()
+        # python-can stamps frames on the wall clock when they arrive (the
+        # kernel does, on socketcan): mapped onto our clock, that is when the
+        # axis sent its estimate, free of this loop's jitter.
+        wall_to_clock = now - time.time()
+        for _ in range(MAX_FRAMES_PER_READ):
+            try:
+                msg = self._bus.recv(timeout=0.0)
+            except can.CanError as exc:
+                raise DriverCommunicationError(f"receive failed: {exc}", PREFIX) from exc
+            if msg is None:
+                break
+            stamp = msg.timestamp + wall_to_clock if msg.timestamp else now
+            self._handle(msg, min(stamp, now))
+        return now
+
+    def _handle(self, msg, now: float) -> None:
+        self.counters["frames_received"] += 1
+        if msg.is_error_frame:
+            self.counters["error_frames"] += 1
+            return
+        node, cmd = proto.split_id(msg.arbitration_id)
+        i = self._index.get(node)
+        if msg.is_extended_id or i is None or msg.is_remote_frame:
+            self.counters["foreign_frames"] += 1
+            return
+        axis = self._axes[i]
+        try:
+            if cmd == Cmd.HEARTBEAT:
+                axis.heartbeat = proto.Heartbeat.decode(bytes(msg.data))
+                axis.heartbeat_time = now
+                axis.heartbeats += 1
+            elif cmd == Cmd.GET_ENCODER_ESTIMATES:
+                est = proto.EncoderEstimates.decode(bytes(msg.data))
+                axis.position_rev, axis.velocity_rev_per_s = est.position_rev, est.velocity_rev_per_s
+                axis.estimate_time = now
+            else:
+                # a command to "our" node from someone else, or a message we
+                # do not use (Get_Error, Get_Iq, ...)
+                self.counters["foreign_frames"] += 1
+        except ValueError:
+            self.counters["bad_frames"] += 1
+
+    def _send(self, node: int, cmd: int, data: bytes, remote: bool = False) -> None:
+        import can
+
+        msg = can.Message(arbitration_id=proto.frame_id(node, cmd), data=data,
+                          is_extended_id=False, is_remote_frame=remote,
+                          dlc=8 if remote else len(data))
+        try:
+            self._bus.send(msg, timeout=0.01)
+        except can.CanError as exc:
+            raise DriverCommunicationError(f"send failed: {exc}", f"ODrive node {node}") from exc
+        self.counters["frames_sent"] += 1
+
+    def _set_mode(self, control_mode: ControlMode, input_mode: InputMode) -> None:
+        for node in self.joints.node_ids:
+            self._send(node, Cmd.SET_CONTROLLER_MODE,
+                       proto.set_controller_mode(control_mode, input_mode))
+        self._control_mode = control_mode
+
+    def _request_estimates(self) -> None:
+        for node in self.joints.node_ids:
+            self._send(node, Cmd.GET_ENCODER_ESTIMATES, b"", remote=True)
+
+    def _idle_all(self) -> None:
+        """Zero setpoint and IDLE to every axis; tries all before raising."""
+        failure = None
+        for node in self.joints.node_ids:
+            for cmd, data in ((Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0)),
+                              (Cmd.SET_AXIS_STATE, proto.set_axis_state(AxisState.IDLE))):
+                try:
+                    if self._control_mode is ControlMode.TORQUE_CONTROL and \
+                            cmd == Cmd.SET_INPUT_VEL:
+                        self._send(node, Cmd.SET_INPUT_TORQUE, proto.set_input_torque(0.0))
+                    else:
+                        self._send(node, cmd, data)
+                except DriverCommunicationError as exc:
+                    failure = failure or exc
+        if failure is not None:
+            raise failure
+
+    def _shutdown_bus(self) -> None:
+        if self._bus is not None:
+            self._bus.shutdown()
+            self._bus = None
+
+
+def _state_name(state: int) -> str:
+    try:
+        return AxisState(state).name
+    except ValueError:
+        return f"state {state}"

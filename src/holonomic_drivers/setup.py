@@ -1,0 +1,20 @@
+from setuptools import find_packages, setup
+
+PACKAGE = "holonomic_drivers"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="Holonomic base developers",
+    maintainer_email="dev@holonomic.invalid",
+    description="Motor drive backends over CAN (ODrive CANSimple, CANopen CiA 402) and "
+                "their emulators",
+    license="Apache-2.0",
+)

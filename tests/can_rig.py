@@ -1,0 +1,147 @@
+"""A base controller on emulated CAN drives, in the test process.
+
+``CanRig(backend, robot)`` opens a private python-can virtual channel,
+starts one emulated drive per joint (background thread), a sniffer that
+records every frame with its send time, the driver and a BaseController.
+``run(seconds, twist)`` steps the controller at its rate on the wall clock
+and records when each cycle started.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import struct
+import time
+
+import can
+import numpy as np
+
+from holonomic_core.controller import BaseController, load_config
+from holonomic_drivers import cia402_protocol as co
+from holonomic_drivers import odrive_protocol as proto
+from holonomic_drivers.emulation import EmulatedCia402Drive, EmulatedOdriveAxis, EmulatorThread
+
+_channels = itertools.count()
+
+
+def unique_channel(tag: str) -> str:
+    return f"{tag}-{os.getpid()}-{next(_channels)}"
+
+
+class CanRig:
+    def __init__(self, backend: str, robot: str = "hamr", **overrides):
+        self.backend = backend
+        self.channel = unique_channel(backend)
+        params = {"driver": backend, f"{backend}.interface": "virtual",
+                  f"{backend}.channel": self.channel}
+        params.update(overrides)
+        self.config = load_config(robot, params)
+        self.model = self.config.model
+        self.driver = self.config.driver_class(self.model, self.config.values,
+                                               self.config.controller.control_rate)
+        self.node_ids = self.driver.joints.node_ids
+        if backend == "odrive_can":
+            self.devices = [EmulatedOdriveAxis(n, self.channel) for n in self.node_ids]
+        else:
+            res = [int(self.config.values[f"cia402.joints.{j}.encoder_resolution"])
+                   for j in self.model.joint_names]
+            self.devices = [EmulatedCia402Drive(n, self.channel, encoder_resolution=r)
+                            for n, r in zip(self.node_ids, res)]
+        self.sniffer = can.Bus(interface="virtual", channel=self.channel)
+        self.frames: list[can.Message] = []
+        self.emulators = EmulatorThread(self.devices).start()
+        self.controller = None
+        self.cycle_starts: list[float] = []
+        #: the odometry's twist after each cycle of ``run``
+        self.odometry_twists: list[np.ndarray] = []
+
+    def configure(self) -> "CanRig":
+        self.driver.configure()
+        self.controller = BaseController(self.config, self.driver)
+        return self
+
+    def arm(self) -> tuple[bool, str]:
+        future = self.controller.request_enable(True)
+        self.step()
+        return future.result(timeout=5.0)
+
+    def step(self) -> bool:
+        self.cycle_starts.append(time.time())
+        return self.controller.step()
+
+    def run(self, seconds: float, twist=None) -> None:
+        period = self.controller.dt
+        next_time = time.monotonic()
+        for _ in range(round(seconds / period)):
+            if twist is not None:
+                self.controller.set_command(twist)
+            self.step()
+            self.odometry_twists.append(self.controller.odometry.twist.copy())
+            next_time += period
+            time.sleep(max(0.0, next_time - time.monotonic()))
+
+    def mean_odometry_twist(self, seconds: float) -> np.ndarray:
+        """Mean odometry twist over the last ``seconds`` of ``run``."""
+        n = max(1, round(seconds / self.controller.dt))
+        return np.mean(self.odometry_twists[-n:], axis=0)
+
+    def sniff(self) -> list[can.Message]:
+        """Every frame on the bus so far (send time in ``timestamp``)."""
+        while (msg := self.sniffer.recv(timeout=0.0)) is not None:
+            self.frames.append(msg)
+        return self.frames
+
+    def cycles_between(self, t0: float, t1: float) -> int:
+        """Control cycles that started in [t0, t1] (wall clock, time.time())."""
+        return sum(t0 <= t <= t1 for t in self.cycle_starts)
+
+    def close(self) -> None:
+        try:
+            self.driver.close()
+        finally:
+            self.emulators.stop()
+            for device in self.devices:
+                device.close()
+            self.sniffer.shutdown()
+
+    # -- what the drives were told -----------------------------------------------------
+    def velocity_setpoints(self, node: int, frames=None) -> list[tuple[float, float]]:
+        """(send time, setpoint [motor rev/s]) sent to ``node``, and for CiA 402 only
+        while the controlword enables operation (else the setpoint is 0)."""
+        out = []
+        for msg in frames if frames is not None else self.sniff():
+            if self.backend == "odrive_can":
+                if msg.arbitration_id == proto.frame_id(node, proto.Cmd.SET_INPUT_VEL):
+                    out.append((msg.timestamp, struct.unpack("<f", msg.data[:4])[0]))
+            elif msg.arbitration_id == co.RPDO[0] + node and len(msg.data) == 6:
+                word, units = struct.unpack("<Hi", msg.data)
+                i = self.node_ids.index(node)
+                rev_s = units / self.driver._vel_units_per_rev_s[i]
+                out.append((msg.timestamp, rev_s if word & 0x8F == 0x0F else 0.0))
+        return out
+
+    def stop_time(self, node: int, after: float) -> float | None:
+        """Send time of the first "stop and disable" frame to ``node`` after ``after``."""
+        for msg in self.sniff():
+            if msg.timestamp < after:
+                continue
+            if self.backend == "odrive_can":
+                if (msg.arbitration_id == proto.frame_id(node, proto.Cmd.SET_AXIS_STATE)
+                        and msg.data[0] == proto.AxisState.IDLE):
+                    return msg.timestamp
+            elif (msg.arbitration_id == co.RPDO[0] + node
+                  and struct.unpack("<Hi", msg.data) == (co.Control.SWITCH_ON, 0)):
+                return msg.timestamp
+        return None
+
+    def motor_to_joint_positions(self) -> np.ndarray:
+        """Joint positions from the emulated motors' own positions, through the
+        mapping as the YAML states it (independent of the driver's JointMap)."""
+        out = []
+        for j, device in zip(self.model.joint_names, self.devices):
+            base = f"{self.backend}.joints.{j}"
+            v = self.config.values
+            out.append(v[f"{base}.direction"] * 2 * np.pi * device.position_rev
+                       / v[f"{base}.gear_ratio"] + v[f"{base}.position_offset"])
+        return np.array(out)

@@ -1,0 +1,253 @@
+"""The base controller on emulated ODrive and CiA 402 drives (python-can
+virtual bus, ROS-free): commands reach the wire as the exact inverse
+kinematics, odometry comes from the reported encoders, and every kind of
+drive failure stops all motors within two control cycles, names the
+device, and blocks motion until the fault is gone and the base is re-armed.
+"""
+
+import math
+import struct
+import time
+
+import can
+import numpy as np
+import pytest
+
+from can_rig import CanRig
+from holonomic_core.controller import ControllerState, load_config
+from holonomic_core.driver import DriverCommunicationError
+from holonomic_core.model import resolve_config
+from holonomic_core.schema import ConfigError
+
+BACKENDS = ["odrive_can", "cia402"]
+
+
+@pytest.fixture
+def rig_factory():
+    rigs = []
+
+    def make(backend, robot="hamr", **overrides):
+        rig = CanRig(backend, robot, **overrides)
+        rigs.append(rig)
+        return rig.configure()
+
+    yield make
+    for rig in rigs:
+        rig.close()
+
+
+def _steady_wire_twist(rig) -> np.ndarray:
+    """The body twist that the last setpoints on the wire produce, through
+    the mapping of the YAML and the model's forward kinematics."""
+    motor = np.array([rig.velocity_setpoints(n)[-1][1] for n in rig.node_ids])
+    joint = []
+    for j, rev_s in zip(rig.model.joint_names, motor):
+        v = rig.config.values
+        joint.append(v[f"{rig.backend}.joints.{j}.direction"] * 2 * math.pi * rev_s
+                     / v[f"{rig.backend}.joints.{j}.gear_ratio"])
+    return rig.model.forward(rig.controller.reading.positions, np.array(joint))
+
+
+@pytest.mark.parametrize("backend,robot", [("odrive_can", "hamr"), ("cia402", "hamr"),
+                                           ("odrive_can", "xr4000"), ("cia402", "comr3")])
+def test_cmd_reaches_the_wire_and_odometry_follows_the_encoders(rig_factory, backend, robot):
+    rig = rig_factory(backend, robot)
+    assert rig.arm() == (True, "motors armed")
+    twist = np.array([0.3, -0.2, 0.4])
+    rig.run(1.5, twist)
+    assert rig.controller.state is ControllerState.ARMED, rig.controller.fault
+    # the wire carries the inverse kinematics of the command
+    assert _steady_wire_twist(rig) == pytest.approx(twist, abs=2e-3)
+    # odometry moves with the command (measured twist over the last 0.5 s)
+    assert rig.mean_odometry_twist(0.5) == pytest.approx(twist, abs=0.01)
+    assert rig.controller.state is ControllerState.ARMED
+    # at standstill, the driver's joint positions are the motors' through
+    # gear and direction (float32 rev for ODrive, whole counts for CiA 402)
+    rig.controller.request_enable(False)
+    rig.run(0.4)
+    tol = 1e-5 if backend == "odrive_can" else 2 * math.pi / 16384
+    assert rig.controller.reading.positions == pytest.approx(rig.motor_to_joint_positions(),
+                                                             abs=tol)
+    assert np.abs(rig.motor_to_joint_positions()).max() > 1.0      # it did move
+
+
+def _fail(rig, device, kind):
+    """Make one drive fail; returns a function giving the wall-clock time
+    from which the failure was visible on the bus."""
+    d = rig.devices.index(device)
+    node = rig.node_ids[d]
+    odrive = rig.backend == "odrive_can"
+    values = rig.config.values
+
+    def last_frame_from(predicate) -> float:
+        return max(m.timestamp for m in rig.sniff() if predicate(m))
+
+    def from_node(m):
+        return ((m.arbitration_id >> 5) == node and (m.arbitration_id & 0x1F) in (0x01, 0x09)
+                if odrive else m.arbitration_id in (0x180 + node, 0x280 + node, 0x700 + node))
+
+    if kind == "heartbeat":
+        device.silent = True
+        timeout = values[f"{rig.backend}.heartbeat_timeout"]
+        return lambda: last_frame_from(from_node) + timeout
+    if kind == "late":
+        if odrive:
+            device.encoder_period = 10.0
+        else:
+            device.answer_every = 1000
+        timeout = values[f"{rig.backend}.feedback_timeout"]
+        return lambda: last_frame_from(
+            lambda m: m.arbitration_id == ((node << 5 | 0x09) if odrive else 0x180 + node)) \
+            + timeout
+    if odrive:
+        device.inject_error(0x20)       # DRV_FAULT
+        return lambda: min(m.timestamp for m in rig.sniff()
+                           if m.arbitration_id == node << 5 | 0x01 and m.data[0] == 0x20)
+    device.inject_fault(0x2310)
+    return lambda: min(m.timestamp for m in rig.sniff() if m.arbitration_id == 0x280 + node
+                       and struct.unpack_from("<H", m.data)[0] & 0x08)
+
+
+def _recover(device, kind, backend):
+    if kind == "heartbeat":
+        device.silent = False
+    elif kind == "late":
+        if backend == "odrive_can":
+            device.encoder_period = 0.01
+        else:
+            device.answer_every = 1
+    else:
+        device.clear_condition()
+
+
+@pytest.mark.parametrize("kind", ["heartbeat", "fault", "late"])
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_failing_drive_stops_every_motor_within_two_cycles(rig_factory, backend, kind):
+    rig = rig_factory(backend, "hamr")
+    assert rig.arm()[0]
+    rig.run(0.5, [0.4, 0.0, 0.5])
+    failing = rig.devices[1]
+    visible_since = _fail(rig, failing, kind)
+    rig.run(0.6, [0.4, 0.0, 0.5])
+
+    c = rig.controller
+    assert c.state is ControllerState.FAULT
+    joint = rig.model.joint_names[1]
+    assert c.fault.startswith(f"{joint} (")          # names the device ...
+    assert f"node {rig.node_ids[1]})" in c.fault      # ... and its address
+    t_visible = visible_since()
+    stops = [rig.stop_time(n, t_visible - 0.5) for n in rig.node_ids]
+    assert all(t is not None for t in stops), f"no stop frame for some drive: {stops}"
+    assert rig.cycles_between(t_visible, max(stops)) <= 2
+    # nothing but zero setpoints after the stop, and the healthy motors stand
+    after = [v for n in rig.node_ids for t, v in rig.velocity_setpoints(n) if t > max(stops)]
+    assert all(v == 0.0 for v in after)
+    for device in rig.devices:
+        if device is not failing:
+            assert device.velocity_rev_per_s == 0.0
+
+    # motion stays refused while the failure lasts, the loop keeps running
+    ok, message = rig.arm()
+    assert not ok and joint in message
+    rig.run(0.2, [0.4, 0.0, 0.5])
+    assert c.state is ControllerState.FAULT
+    assert all(d.velocity_rev_per_s == 0.0 for d in rig.devices if d is not failing)
+
+    _recover(failing, kind, backend)
+    rig.run(0.3)
+    assert c.state is ControllerState.FAULT          # no silent re-arm
+    assert rig.arm() == (True, "motors armed")
+    rig.run(0.9, [0.4, 0.0, 0.5])          # 0.4 s to reach 0.4 m/s at 1 m/s^2
+    assert c.state is ControllerState.ARMED
+    assert rig.mean_odometry_twist(0.2) == pytest.approx([0.4, 0.0, 0.5], abs=0.02)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_bad_frames_are_ignored_and_counted(rig_factory, backend):
+    rig = rig_factory(backend, "hamr")
+    assert rig.arm()[0]
+    rig.run(0.3, [0.3, 0.0, 0.0])
+    script = can.Bus(interface="virtual", channel=rig.channel)
+    try:
+        if backend == "odrive_can":
+            bad = [(0x01, b"\x00\x00"),                          # node 0 heartbeat, 2 bytes
+                   (0x09, struct.pack("<ff", math.nan, 1.0)),    # NaN encoder estimate
+                   (0x29, b"\x01\x02\x03")]                      # node 1 estimates, 3 bytes
+        else:
+            bad = [(0x181, b"\x01\x02\x03"), (0x282, b"\x01"), (0x701, b"\x05\x05")]
+        before = dict(rig.driver.counters)
+        for arbitration_id, data in bad:
+            script.send(can.Message(arbitration_id=arbitration_id, data=data,
+                                    is_extended_id=False))
+        script.send(can.Message(arbitration_id=0x1ABCDEF, data=b"\x00" * 8, is_extended_id=True))
+        rig.run(0.3, [0.3, 0.0, 0.0])
+    finally:
+        script.shutdown()
+    assert rig.driver.counters["bad_frames"] - before["bad_frames"] == 3
+    assert rig.controller.state is ControllerState.ARMED
+    assert np.all(np.isfinite(rig.controller.reading.positions))
+    assert rig.mean_odometry_twist(0.2) == pytest.approx([0.3, 0.0, 0.0], abs=0.01)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_shutdown_stops_and_disarms_every_drive(rig_factory, backend):
+    rig = rig_factory(backend, "hamr")
+    assert rig.arm()[0]
+    rig.run(0.3, [0.3, 0.0, 0.5])
+    t = time.time()
+    rig.controller.shutdown()
+    assert all(rig.stop_time(n, t) is not None for n in rig.node_ids)
+    time.sleep(0.3)
+    assert all(d.velocity_rev_per_s == 0.0 for d in rig.devices)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_configure_names_the_drive_that_does_not_answer(backend):
+    timeouts = {f"{backend}.startup_timeout": 0.3}
+    if backend == "cia402":
+        timeouts["cia402.sdo_timeout"] = 0.05
+    rig = CanRig(backend, "hamr", **timeouts)
+    rig.devices[2].silent = True
+    try:
+        with pytest.raises(DriverCommunicationError, match=rf"{rig.model.joint_names[2]} \("):
+            rig.configure()
+    finally:
+        rig.close()
+
+
+def test_configure_refuses_an_unopenable_bus():
+    config = load_config("hamr", {"driver": "odrive_can", "odrive_can.interface": "socketcan",
+                                  "odrive_can.channel": "nonexistent7"})
+    driver = config.driver_class(config.model, config.values, 200.0)
+    with pytest.raises(DriverCommunicationError, match="cannot open CAN bus socketcan:nonexistent7"):
+        driver.configure()
+
+
+@pytest.mark.parametrize("overrides,key", [
+    ({"odrive_can.joints.turret_joint.node_id": 0}, "odrive_can.joints.turret_joint.node_id"),
+    ({"odrive_can.joints.turret_joint.direction": 0}, "odrive_can.joints.turret_joint.direction"),
+    ({"odrive_can.joints.turret_joint.node_id": 64}, "odrive_can.joints.turret_joint.node_id"),
+    ({"odrive_can.joints.turret_joint.gear_ratio": -1.0},
+     "odrive_can.joints.turret_joint.gear_ratio"),
+    ({"driver": "cia402", "cia402.master_node_id": 2}, "cia402.master_node_id"),
+    ({"driver": "cia402", "cia402.joints.left_wheel_joint.encoder_resolution": 0.0},
+     "cia402.joints.left_wheel_joint.encoder_resolution"),
+    ({"driver": "cia402", "cia402.mode": "torque"}, "cia402.mode"),
+])
+def test_bad_drive_mapping_is_refused_with_the_key(overrides, key):
+    params = {"driver": "odrive_can"}
+    params.update(overrides)
+    with pytest.raises(ConfigError) as err:
+        config = load_config("hamr", params)
+        config.driver_class(config.model, config.values, 200.0)
+    assert err.value.key == key
+
+
+def test_missing_node_id_is_refused_with_the_key(tmp_path):
+    text = resolve_config("hamr").read_text().replace("turret_joint: {node_id: 2, ",
+                                                      "turret_joint: {")
+    path = tmp_path / "hamr_missing.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_config(str(path), {"driver": "odrive_can"})
+    assert err.value.key == "odrive_can.joints.turret_joint.node_id"
