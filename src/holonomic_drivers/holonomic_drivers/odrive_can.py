@@ -1,7 +1,7 @@
 """The ``odrive_can`` backend: ODrive motor controllers over CANSimple.
 
 One ODrive axis per joint, addressed by its CAN node id. The driver sends
-velocity (or torque) setpoints every cycle and takes positions and speeds
+velocity setpoints every cycle and takes positions and speeds
 from the encoder estimates that each axis broadcasts (``encoder_msg_rate_ms``
 on the ODrive, 10 ms by default) or, with ``odrive_can.poll_encoders``,
 answers to a remote request sent every cycle.
@@ -58,7 +58,9 @@ class _Axis:
 
 class OdriveCanDriver(Driver):
     name = "odrive_can"
-    supports_effort = True
+    # Torque mode (Set_Input_Torque) comes with the dynamic controller
+    # (issue 9), tested there; until then the backend refuses it.
+    supports_effort = False
 
     def __init__(self, model, params, control_rate: float,
                  clock: Callable[[], float] = time.monotonic):
@@ -73,7 +75,6 @@ class OdriveCanDriver(Driver):
         self._startup_timeout = float(params[f"{PREFIX}.startup_timeout"])
         self._input_mode = _INPUT_MODES[params[f"{PREFIX}.input_mode"]]
         self._poll = bool(params[f"{PREFIX}.poll_encoders"])
-        self._control_mode = ControlMode.VELOCITY_CONTROL
         self._bus = None
         self.counters = {"bad_frames": 0, "foreign_frames": 0, "error_frames": 0,
                          "frames_received": 0, "frames_sent": 0}
@@ -133,7 +134,6 @@ class OdriveCanDriver(Driver):
                     ControlMode.VELOCITY_CONTROL, self._input_mode))
                 self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
                 self._send(node, Cmd.SET_AXIS_STATE, proto.set_axis_state(AxisState.IDLE))
-            self._control_mode = ControlMode.VELOCITY_CONTROL
         except BaseException:
             self._shutdown_bus()
             raise
@@ -148,7 +148,6 @@ class OdriveCanDriver(Driver):
             self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
             self._send(node, Cmd.SET_AXIS_STATE,
                        proto.set_axis_state(AxisState.CLOSED_LOOP_CONTROL))
-        self._control_mode = ControlMode.VELOCITY_CONTROL
         deadline = time.monotonic() + self._startup_timeout
         while True:
             self._drain()
@@ -212,20 +211,9 @@ class OdriveCanDriver(Driver):
                             self.joints.to_joint_velocities(velocities), self._no_efforts)
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
-        if self._control_mode is not ControlMode.VELOCITY_CONTROL:
-            self._set_mode(ControlMode.VELOCITY_CONTROL, self._input_mode)
         motor = self.joints.to_motor_velocities(np.asarray(velocities, float))
         for node, value in zip(self.joints.node_ids, motor):
             self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(float(value)))
-        if self._poll:
-            self._request_estimates()
-
-    def _on_write_efforts(self, efforts: np.ndarray) -> None:
-        if self._control_mode is not ControlMode.TORQUE_CONTROL:
-            self._set_mode(ControlMode.TORQUE_CONTROL, InputMode.PASSTHROUGH)
-        motor = self.joints.to_motor_torques(np.asarray(efforts, float))
-        for node, value in zip(self.joints.node_ids, motor):
-            self._send(node, Cmd.SET_INPUT_TORQUE, proto.set_input_torque(float(value)))
         if self._poll:
             self._request_estimates()
 
@@ -303,12 +291,6 @@ class OdriveCanDriver(Driver):
             raise DriverCommunicationError(f"send failed: {exc}", f"ODrive node {node}") from exc
         self.counters["frames_sent"] += 1
 
-    def _set_mode(self, control_mode: ControlMode, input_mode: InputMode) -> None:
-        for node in self.joints.node_ids:
-            self._send(node, Cmd.SET_CONTROLLER_MODE,
-                       proto.set_controller_mode(control_mode, input_mode))
-        self._control_mode = control_mode
-
     def _request_estimates(self) -> None:
         for node in self.joints.node_ids:
             self._send(node, Cmd.GET_ENCODER_ESTIMATES, b"", remote=True)
@@ -320,11 +302,7 @@ class OdriveCanDriver(Driver):
             for cmd, data in ((Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0)),
                               (Cmd.SET_AXIS_STATE, proto.set_axis_state(AxisState.IDLE))):
                 try:
-                    if self._control_mode is ControlMode.TORQUE_CONTROL and \
-                            cmd == Cmd.SET_INPUT_VEL:
-                        self._send(node, Cmd.SET_INPUT_TORQUE, proto.set_input_torque(0.0))
-                    else:
-                        self._send(node, cmd, data)
+                    self._send(node, cmd, data)
                 except DriverCommunicationError as exc:
                     failure = failure or exc
         if failure is not None:
