@@ -27,7 +27,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from holonomic_core.driver import DriverCommunicationError
+from holonomic_core.driver import Driver, DriverCommunicationError
 from holonomic_core.schema import ConfigError, ParamSpec
 
 TWO_PI = 2.0 * math.pi
@@ -140,3 +140,28 @@ def open_bus(prefix: str, params: Mapping[str, Any]):
         raise DriverCommunicationError(
             f"cannot open CAN bus {interface}:{channel} ({exc}); on socketcan check "
             f"`ip link show {channel}` (up, right bitrate)", prefix) from exc
+
+
+class CanDriver(Driver):
+    """What both CAN backends share: the joint map (parameter prefix = the
+    backend's registry name), each joint's device name for messages, the bus
+    and frame counters in ``status``, and NaN efforts (no torque read-back)."""
+
+    #: how messages name a device: "ODrive", "CANopen"
+    device_kind = ""
+
+    def __init__(self, model, params, control_rate: float):
+        super().__init__(model, params, control_rate)
+        self.joints = JointMap.from_params(self.name, model.joint_names, params)
+        #: "left_wheel_joint (ODrive node 0)", by joint index
+        self.devices = tuple(self.joints.device(i, self.device_kind)
+                             for i in range(len(self.joints.node_ids)))
+        self.counters: dict[str, int] = {}
+        self._no_efforts = np.full(len(self.devices), np.nan)
+        self._no_efforts.flags.writeable = False
+
+    def status(self) -> dict[str, str]:
+        out = super().status()
+        out["bus"] = f"{self.params[f'{self.name}.interface']}:{self.params[f'{self.name}.channel']}"
+        out.update({k: str(v) for k, v in self.counters.items()})
+        return out

@@ -44,11 +44,11 @@ import can
 import canopen
 import numpy as np
 
-from holonomic_core.driver import (Driver, DriverCommunicationError, DriverError, DriverFault,
+from holonomic_core.driver import (DriverCommunicationError, DriverError, DriverFault,
                                    JointReading)
 from holonomic_core.schema import ConfigError, ParamSpec
 from holonomic_drivers import cia402_protocol as co
-from holonomic_drivers.can_link import JointMap, bus_specs, joint_map_specs, open_bus
+from holonomic_drivers.can_link import CanDriver, bus_specs, joint_map_specs, open_bus
 from holonomic_drivers.cia402_protocol import Control, State
 
 PREFIX = "cia402"
@@ -101,15 +101,13 @@ class _Drive:
     emcy_code: int = 0
 
 
-class Cia402Driver(Driver):
+class Cia402Driver(CanDriver):
     name = "cia402"
+    device_kind = "CANopen"
     supports_effort = False
 
-    def __init__(self, model, params, control_rate: float,
-                 clock: Callable[[], float] = time.monotonic):
+    def __init__(self, model, params, control_rate: float):
         super().__init__(model, params, control_rate)
-        self._clock = clock
-        self.joints = JointMap.from_params(PREFIX, model.joint_names, params)
         p = lambda key: params[f"{PREFIX}.{key}"]  # noqa: E731
         self._master_id = int(p("master_node_id"))
         if self._master_id in self.joints.node_ids:
@@ -130,8 +128,7 @@ class Cia402Driver(Driver):
             vel_units.append(vres if vres > 0 else res)
         self._counts_per_rev = np.array(counts)
         self._vel_units_per_rev_s = np.array(vel_units)
-        n = len(model.joint_names)
-        self._drives = [_Drive() for _ in range(n)]
+        self._drives = [_Drive() for _ in self.devices]
         self._cob = {}
         for i, node in enumerate(self.joints.node_ids):
             self._cob[co.TPDO[0] + node] = (i, self._on_tpdo1)
@@ -144,8 +141,6 @@ class Cia402Driver(Driver):
         self._next_master_heartbeat = -math.inf
         self._sync_time = -math.inf
         self.counters = {"bad_frames": 0, "emcy": 0, "syncs": 0, "frames_sent": 0}
-        self._no_efforts = np.full(n, np.nan)
-        self._no_efforts.flags.writeable = False
 
     @classmethod
     def param_specs(cls, model) -> list[ParamSpec]:
@@ -195,7 +190,7 @@ class Cia402Driver(Driver):
         self._network = network
         try:
             self._nodes = []
-            for i, node_id in enumerate(self.joints.node_ids):
+            for node_id in self.joints.node_ids:
                 node = canopen.RemoteNode(node_id, canopen.ObjectDictionary())
                 network.add_node(node)
                 node.sdo.RESPONSE_TIMEOUT = self._sdo_timeout
@@ -214,7 +209,7 @@ class Cia402Driver(Driver):
             raise
 
     def _configure_drive(self, i: int, node) -> None:
-        device = self.joints.device(i, "CANopen")
+        device = self.devices[i]
         node.nmt.send_command(co.NmtCommand.ENTER_PRE_OPERATIONAL)
         try:
             (device_type,) = struct.unpack("<I", node.sdo.upload(co.DEVICE_TYPE, 0)[:4])
@@ -248,9 +243,9 @@ class Cia402Driver(Driver):
             for i, node in enumerate(self._nodes):
                 self._enable_drive(i, node)
                 # keep SYNC and the master heartbeat going (drive watchdogs)
-                self._cycle_frames(self._clock())
+                self._cycle_frames(time.monotonic())
             # the first read after arming must find fresh PDOs from enabled drives
-            enabled = self._clock()
+            enabled = time.monotonic()
             self._wait("PDOs from the enabled drives", lambda: self._first_not_ready(enabled))
         except (canopen.SdoCommunicationError, canopen.SdoAbortedError, can.CanError) as exc:
             self._stop_all()
@@ -260,7 +255,7 @@ class Cia402Driver(Driver):
             raise
 
     def _enable_drive(self, i: int, node) -> None:
-        device = self.joints.device(i, "CANopen")
+        device = self.devices[i]
         state = self._sdo_state(node)
         if state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
             # fault reset acts on the rising edge of bit 7
@@ -297,7 +292,7 @@ class Cia402Driver(Driver):
 
     # -- cycle --------------------------------------------------------------------------------
     def _on_read(self) -> JointReading:
-        now = self._clock()
+        now = time.monotonic()
         with self._lock:
             drives = [_Drive(**vars(d)) for d in self._drives]
         try:
@@ -313,7 +308,7 @@ class Cia402Driver(Driver):
         velocities = np.empty(len(drives))
         armed = self.armed
         for i, d in enumerate(drives):
-            device = self.joints.device(i, "CANopen")
+            device = self.devices[i]
             age = now - d.heartbeat_time
             if age > self._heartbeat_timeout:
                 raise DriverCommunicationError(f"no heartbeat for {age * 1e3:.0f} ms (limit "
@@ -336,11 +331,10 @@ class Cia402Driver(Driver):
         # stamped with the SYNC at which the drives sampled; a cycle whose
         # PDOs have not arrived yet repeats the stamp (the odometry then
         # waits for them instead of seeing a standstill)
-        reading = JointReading(
-            max(d.sample_time for d in drives), self.joints.to_joint_positions(positions / self._counts_per_rev),
-            self.joints.to_joint_velocities(velocities / self._vel_units_per_rev_s),
-            self._no_efforts)
-        return reading
+        return JointReading(max(d.sample_time for d in drives),
+                            self.joints.to_joint_positions(positions / self._counts_per_rev),
+                            self.joints.to_joint_velocities(velocities / self._vel_units_per_rev_s),
+                            self._no_efforts)
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
         motor = self.joints.to_motor_velocities(np.asarray(velocities, float))
@@ -351,9 +345,7 @@ class Cia402Driver(Driver):
 
     def status(self) -> dict[str, str]:
         out = super().status()
-        out["bus"] = f"{self.params[f'{PREFIX}.interface']}:{self.params[f'{PREFIX}.channel']}"
-        out.update({k: str(v) for k, v in self.counters.items()})
-        now = self._clock()
+        now = time.monotonic()
         with self._lock:
             for i, d in enumerate(self._drives):
                 out[self.joints.joint_names[i]] = (
@@ -410,8 +402,8 @@ class Cia402Driver(Driver):
             if time.monotonic() > deadline:
                 raise DriverCommunicationError(
                     f"no {what} within {self._startup_timeout:g} s",
-                    self.joints.device(i, "CANopen"))
-            self._cycle_frames(self._clock())
+                    self.devices[i])
+            self._cycle_frames(time.monotonic())
             time.sleep(0.005)
 
     def _first_not_ready(self, since: float = -math.inf, enabled: bool = True) -> int | None:
@@ -438,7 +430,7 @@ class Cia402Driver(Driver):
         i, handler = entry
         try:
             with self._lock:
-                handler(self._drives[i], bytes(data), self._clock())
+                handler(self._drives[i], bytes(data), time.monotonic())
         except (struct.error, ValueError):
             self.counters["bad_frames"] += 1
 

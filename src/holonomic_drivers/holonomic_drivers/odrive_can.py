@@ -28,14 +28,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
-from holonomic_core.driver import (Driver, DriverCommunicationError, DriverFault, JointReading)
+from holonomic_core.driver import DriverCommunicationError, DriverFault, JointReading
 from holonomic_core.schema import ParamSpec
 from holonomic_drivers import odrive_protocol as proto
-from holonomic_drivers.can_link import JointMap, bus_specs, joint_map_specs, open_bus
+from holonomic_drivers.can_link import CanDriver, bus_specs, joint_map_specs, open_bus
 from holonomic_drivers.odrive_protocol import AxisState, Cmd, ControlMode, InputMode
 
 PREFIX = "odrive_can"
@@ -56,18 +55,15 @@ class _Axis:
     estimate_time: float = -math.inf
 
 
-class OdriveCanDriver(Driver):
+class OdriveCanDriver(CanDriver):
     name = "odrive_can"
+    device_kind = "ODrive"
     # Torque mode (Set_Input_Torque) comes with the dynamic controller
     # (issue 9), tested there; until then the backend refuses it.
     supports_effort = False
 
-    def __init__(self, model, params, control_rate: float,
-                 clock: Callable[[], float] = time.monotonic):
-        """``clock`` [s]: monotonic time of heartbeats and readings (injectable for tests)."""
+    def __init__(self, model, params, control_rate: float):
         super().__init__(model, params, control_rate)
-        self._clock = clock
-        self.joints = JointMap.from_params(PREFIX, model.joint_names, params)
         self._index = {node: i for i, node in enumerate(self.joints.node_ids)}
         self._axes = [_Axis() for _ in self.joints.node_ids]
         self._heartbeat_timeout = float(params[f"{PREFIX}.heartbeat_timeout"])
@@ -78,8 +74,6 @@ class OdriveCanDriver(Driver):
         self._bus = None
         self.counters = {"bad_frames": 0, "foreign_frames": 0, "error_frames": 0,
                          "frames_received": 0, "frames_sent": 0}
-        self._no_efforts = np.full(len(self._axes), np.nan)
-        self._no_efforts.flags.writeable = False
 
     @classmethod
     def param_specs(cls, model) -> list[ParamSpec]:
@@ -124,7 +118,7 @@ class OdriveCanDriver(Driver):
                     raise DriverCommunicationError(
                         f"{what} within {self._startup_timeout:g} s (is it powered, on "
                         f"this bus, with this node id and bit rate?)",
-                        self.joints.device(i, "ODrive"))
+                        self.devices[i])
                 if self._poll:
                     self._request_estimates()
                 time.sleep(0.002)
@@ -168,7 +162,7 @@ class OdriveCanDriver(Driver):
                        else f"state {_state_name(hb.axis_state)}, error "
                             f"0x{hb.axis_error:X} ({proto.error_names(hb.axis_error)})")
                 raise DriverFault(f"did not enter closed-loop control ({why}); motors left idle",
-                                  self.joints.device(i, "ODrive"))
+                                  self.devices[i])
             time.sleep(0.002)
 
     def _on_deactivate(self) -> None:
@@ -184,7 +178,7 @@ class OdriveCanDriver(Driver):
         velocities = np.empty(len(self._axes))
         armed = self.armed
         for i, axis in enumerate(self._axes):
-            device = self.joints.device(i, "ODrive")
+            device = self.devices[i]
             age = now - axis.heartbeat_time
             if age > self._heartbeat_timeout:
                 raise DriverCommunicationError(
@@ -219,9 +213,7 @@ class OdriveCanDriver(Driver):
 
     def status(self) -> dict[str, str]:
         out = super().status()
-        out["bus"] = f"{self.params[f'{PREFIX}.interface']}:{self.params[f'{PREFIX}.channel']}"
-        out.update({k: str(v) for k, v in self.counters.items()})
-        now = self._clock()
+        now = time.monotonic()
         for i, axis in enumerate(self._axes):
             hb = axis.heartbeat
             out[self.joints.joint_names[i]] = (
@@ -236,7 +228,7 @@ class OdriveCanDriver(Driver):
         """Take every waiting frame off the bus; returns the clock after it."""
         import can
 
-        now = self._clock()
+        now = time.monotonic()
         # python-can stamps frames on the wall clock when they arrive (the
         # kernel does, on socketcan): mapped onto our clock, that is when the
         # axis sent its estimate, free of this loop's jitter.
