@@ -1,0 +1,1 @@
+"""The papers' design tools as a library (see each module)."""
