@@ -17,7 +17,8 @@ HEADER = """\
 # direct dependencies are ros-jazzy-rclpy, ros-jazzy-common-interfaces,
 # ros-jazzy-rmw-fastrtps-cpp, ros-jazzy-rosgraph-msgs, ros-jazzy-std-srvs, the
 # rosidl generators and ament_cmake (to build tf2_msgs), numpy, pybullet,
-# pyyaml, matplotlib, colcon-common-extensions, pytest and hypothesis."""
+# pyyaml, matplotlib, python-can, canopen, mcap, mcap-ros2-support,
+# colcon-common-extensions, pytest and hypothesis."""
 
 pins = {}
 for dist in md.distributions():

@@ -4,7 +4,6 @@ in-process probe node."""
 
 from __future__ import annotations
 
-import fcntl
 import os
 import tempfile
 import threading
@@ -12,31 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from ros_probe import Bringup
-
-_LOCK_DIR = Path(tempfile.gettempdir())
-_domain_lock = None
-
-
-def _claim_domain_id() -> int:
-    """A ROS_DOMAIN_ID no other test run on this machine holds (file locks)."""
-    global _domain_lock
-    for domain in range(11, 101):
-        handle = open(_LOCK_DIR / f"holonomic_test_ros_domain_{domain}.lock", "w")
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        _domain_lock = handle  # held until the process exits
-        return domain
-    raise RuntimeError("no free ROS_DOMAIN_ID in 11..100 for the tests")
+from ros_probe import Bringup, claim_domain_id
 
 
 def pytest_configure(config):
     # Before anything imports rclpy; subprocesses inherit these.
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ["ROS_DOMAIN_ID"] = str(_claim_domain_id())
+    os.environ["ROS_DOMAIN_ID"] = str(claim_domain_id())
     os.environ.setdefault("ROS_LOG_DIR", str(Path(tempfile.gettempdir()) / "holonomic_test_ros_log"))
 
 

@@ -3,10 +3,15 @@ and the product's RobotClient (as ``Probe``) for talking to it."""
 
 from __future__ import annotations
 
+import fcntl
 import math
+import os
+import pty
+import select
 import shutil
 import signal
 import subprocess
+import tempfile
 import time
 from pathlib import Path
 
@@ -14,6 +19,25 @@ import numpy as np
 
 from holonomic_bringup.robot_client import RobotClient as Probe  # noqa: F401
 from holonomic_bringup.robot_client import relative_pose, wait_until  # noqa: F401
+
+
+_held_domain_locks = []
+
+
+def claim_domain_id() -> int:
+    """A ROS_DOMAIN_ID no other test run on this machine holds (file locks,
+    held until this process exits)."""
+    folder = Path(tempfile.gettempdir())
+    for domain in range(11, 101):
+        handle = open(folder / f"holonomic_test_ros_domain_{domain}.lock", "w")
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        _held_domain_locks.append(handle)
+        return domain
+    raise RuntimeError("no free ROS_DOMAIN_ID in 11..100 for the tests")
 
 
 def drive_script(probe, script) -> tuple[float, float, float]:
@@ -40,14 +64,15 @@ def drive_script(probe, script) -> tuple[float, float, float]:
 class Bringup:
     """A ``holonomic-bringup`` subprocess, ended by its PID."""
 
-    def __init__(self, args: list[str], log_path: Path):
+    def __init__(self, args: list[str], log_path: Path, env: dict | None = None):
+        """``env``: variables to set for the process (e.g. another ROS_DOMAIN_ID)."""
         exe = shutil.which("holonomic-bringup")
         if exe is None:
             raise RuntimeError("holonomic-bringup is not on PATH: run the tests with `make test`")
         self.log_path = log_path
         self._log = open(log_path, "w")
         self.proc = subprocess.Popen([exe] + args, stdout=self._log, stderr=subprocess.STDOUT,
-                                     start_new_session=True)
+                                     start_new_session=True, env={**os.environ, **(env or {})})
 
     def log(self) -> str:
         if not self._log.closed:
@@ -65,4 +90,47 @@ class Bringup:
                 self.proc.wait()
         if not self._log.closed:
             self._log.close()
+        return self.proc.returncode
+
+
+class Teleop:
+    """holonomic-teleop in a pseudo-terminal (its stdin is a real tty)."""
+
+    def __init__(self, *args: str):
+        exe = shutil.which("holonomic-teleop")
+        assert exe, "holonomic-teleop is not on PATH: run the tests with `make test`"
+        self.master, slave = pty.openpty()
+        self.proc = subprocess.Popen([exe, *args], stdin=slave, stdout=slave, stderr=slave,
+                                     start_new_session=True)
+        os.close(slave)
+        self.output = b""
+
+    def press(self, keys: str) -> None:
+        os.write(self.master, keys.encode())
+        self.drain()
+
+    def drain(self) -> None:
+        while select.select([self.master], [], [], 0)[0]:
+            try:
+                self.output += os.read(self.master, 4096)
+            except OSError:
+                return
+
+    def hold(self, key: str, seconds: float, every: float = 0.05) -> None:
+        """Key auto-repeat: the key pressed every ``every`` s."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.press(key)
+            time.sleep(every)
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.drain()
+        os.close(self.master)
         return self.proc.returncode

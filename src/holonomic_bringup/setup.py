@@ -1,3 +1,5 @@
+from glob import glob
+
 from setuptools import find_packages, setup
 
 PACKAGE = "holonomic_bringup"
@@ -9,6 +11,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
+        ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -20,6 +23,8 @@ setup(
         "console_scripts": [
             "holonomic-bringup = holonomic_bringup.bringup:main",
             "holonomic-demo = holonomic_bringup.demo:main",
+            "holonomic-teleop = holonomic_bringup.teleop:main",
+            "holonomic-plot = holonomic_bringup.recording_plot:main",
             "base_controller = holonomic_bringup.base_controller_node:main",
         ],
     },

@@ -4,7 +4,8 @@ Parameters -> a validated RobotConfig -> driver + BaseController; messages in
 -> ``BaseController.set_command``; the control loop thread runs
 ``BaseController.step`` at ``control_rate`` and publishes odometry, /tf,
 joint states, diagnostics (and, with the simulator, ground truth and /clock)
-from the same thread, decimated to ``publish_rate`` / 1 Hz.
+from the same thread, decimated to ``publish_rate`` / 1 Hz. The robot's URDF
+(the one the simulator is built from) is latched on ``robot_description``.
 
 The robot's YAML is named by the ``robot_config`` parameter (a config name or
 a path); every key of it can be overridden with ROS parameters
@@ -28,11 +29,11 @@ from nav_msgs.msg import Odometry as OdometryMsg
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
 from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
 
@@ -41,6 +42,7 @@ from holonomic_core.driver import DriverError
 from holonomic_core.loop import ControlLoop
 from holonomic_core.model import read_params_file, resolve_config
 from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_sim.urdf import generate_urdf
 from holonomic_bringup.process_guard import (STOP, InstanceConflict, InstanceLock,
                                              install_signal_handlers)
 
@@ -107,8 +109,13 @@ def _fill_covariance(target, cov3: np.ndarray) -> None:
 class BaseControllerNode(Node):
     """See the module docstring. Raises ConfigError (clean message) on bad config."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, world=None, start_loop: bool = True, **kwargs):
+        """``world``: a shared simulated world (a fleet in one simulation; the
+        ``sim`` driver then does not step it). ``start_loop``: False when the
+        caller runs :meth:`control_cycle` itself (the fleet's one loop)."""
         super().__init__(NODE_NAME, **kwargs)
+        self._world = world
+        self._start_loop = start_loop
         self._instance_lock: InstanceLock | None = None
         try:
             self._configure()
@@ -132,7 +139,9 @@ class BaseControllerNode(Node):
         self._instance_lock = InstanceLock(self.get_fully_qualified_name())
 
         # driver + core
-        self.driver = self.config.driver_class(model, self.config.values, ctrl.control_rate)
+        extra = {"world": self._world} if self._world is not None else {}
+        self.driver = self.config.driver_class(model, self.config.values, ctrl.control_rate,
+                                               **extra)
         try:
             self.driver.configure()
         except DriverError as exc:
@@ -145,7 +154,8 @@ class BaseControllerNode(Node):
         # simulator runs in real time.
         self._epoch = time.time() if self._sim else 0.0
 
-        self._odom_frame, self._base_frame = ctrl.odom_frame, ctrl.base_frame
+        prefix = self.config.values["frame_prefix"]
+        self._odom_frame, self._base_frame = prefix + ctrl.odom_frame, prefix + ctrl.base_frame
         self._publish_tf = ctrl.publish_tf
         self._publish_every = max(1, round(ctrl.control_rate / ctrl.publish_rate))
         self._clock_every = max(1, round(ctrl.control_rate / 250.0))
@@ -153,12 +163,13 @@ class BaseControllerNode(Node):
         self._cycle = 0
 
         self._make_interfaces()
-        self.loop = ControlLoop(1.0 / ctrl.control_rate, self._control_cycle,
+        self.loop = ControlLoop(1.0 / ctrl.control_rate, self.control_cycle,
                                 on_error=self._on_loop_error, name=f"{NODE_NAME}_loop")
         self._loop_errors = 0
         if ctrl.enable_on_start:
             self.controller.request_enable(True)
-        self.loop.start()
+        if self._start_loop:
+            self.loop.start()
         self.get_logger().info(
             f"{model.name} ({model.kind}) on driver '{ctrl.driver}' at {ctrl.control_rate:g} Hz; "
             f"motors {'arming' if ctrl.enable_on_start else 'DISARMED (call ~/enable)'}")
@@ -202,6 +213,12 @@ class BaseControllerNode(Node):
         self.gt_pub = self.create_publisher(OdometryMsg, "ground_truth/odom", 10) \
             if self.driver.ground_truth() is not None else None
         self.clock_pub = self.create_publisher(Clock, "/clock", 10) if self._sim else None
+        # The URDF the simulator uses, latched, for rviz (robot_state_publisher
+        # is not needed for the base's own frames: odom -> base_link is on /tf).
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.description_pub = self.create_publisher(String, "robot_description", latched)
+        self.description_pub.publish(String(data=generate_urdf(self.config.model)))
         self.create_service(Trigger, "~/reset_odometry", self._on_reset_odometry)
         self.create_service(SetBool, "~/enable", self._on_enable)
 
@@ -255,7 +272,7 @@ class BaseControllerNode(Node):
         return response
 
     # -- the loop thread ----------------------------------------------------------
-    def _control_cycle(self) -> None:
+    def control_cycle(self) -> None:
         controller = self.controller
         controller.step()
         self._loop_errors = 0
@@ -267,7 +284,7 @@ class BaseControllerNode(Node):
             return
         if self._sim:
             stamp = _stamp(self._epoch + reading.stamp)
-            if self._cycle % self._clock_every == 0:
+            if self.clock_pub is not None and self._cycle % self._clock_every == 0:
                 self.clock_pub.publish(Clock(clock=stamp))
         else:
             # map the driver's monotonic stamp onto ROS time
@@ -399,11 +416,12 @@ class BaseControllerNode(Node):
             self._instance_lock.release()
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, record: str | None = None) -> int:
     """Run the node until SIGINT/SIGTERM; exit 0 after stopping the motors.
 
-    Exit 2 with a one-line message on an invalid configuration, 3 when the
-    same controller already runs (same namespace and ROS domain).
+    ``record``: an MCAP file to record the robot's topics to. Exit 2 with a
+    one-line message on an invalid configuration, 3 when the same controller
+    already runs (same namespace and ROS domain).
     """
     install_signal_handlers()   # before anything slow: a signal at any moment
     # The control loop thread shares the GIL with the executor's callbacks. By
@@ -430,12 +448,26 @@ def main(argv: list[str] | None = None) -> int:
         return 3
     executor = SingleThreadedExecutor()
     executor.add_node(node)
+    recorder = None
     try:
+        if record:
+            from holonomic_bringup.recorder import McapRecorder
+            try:
+                recorder = McapRecorder(node, record, [(node.get_namespace(),
+                                                        dict(node.config.values),
+                                                        node.config.controller.cmd_vel_stamped)])
+            except OSError as exc:
+                print(f"{NODE_NAME}: cannot record to {record}: {exc}", file=sys.stderr)
+                return 2
+            node.get_logger().info(f"recording to {record}")
         while not STOP.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
     finally:
         node.shutdown()
         node.get_logger().info("motors stopped and disarmed; exiting")
+        if recorder is not None:
+            recorder.close()
+            node.get_logger().info(f"wrote {recorder.count} messages to {record}")
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()

@@ -36,6 +36,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="arm the motors at start (default: disarmed until ~/enable)")
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
                         help="override one parameter, e.g. -p cmd_timeout:=1.0")
+    parser.add_argument("--fleet", type=int, metavar="N",
+                        help="run N robots (namespaces robot1..robotN) in one simulated world")
+    parser.add_argument("--record", metavar="FILE.mcap",
+                        help="record cmd_vel, odom, /tf, joint_states, ground_truth/odom, "
+                             "diagnostics and robot_description to an MCAP file "
+                             "(Foxglove, ros2 bag, holonomic-plot)")
     return parser.parse_args(argv)
 
 
@@ -47,6 +53,9 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
     if args.namespace:
         ns = args.namespace if args.namespace.startswith("/") else "/" + args.namespace
         ros += ["-r", f"__ns:={ns}"]
+        # every frame of the robot under its namespace too (a -p frame_prefix
+        # given below wins: later overrides replace earlier ones)
+        ros += ["-p", f"frame_prefix:={ns.strip('/')}/"]
     if args.driver:
         ros += ["-p", f"driver:={args.driver}"]
     if args.gui:
@@ -76,7 +85,22 @@ def main(argv: list[str] | None = None) -> int:
         print(f"holonomic-bringup: {exc}", file=sys.stderr)
         return 2
     from holonomic_bringup.base_controller_node import main as node_main
-    return node_main(["holonomic-bringup"] + ros)
+    if args.record and not args.record.endswith(".mcap"):
+        print(f"holonomic-bringup: --record wants a FILE.mcap, got {args.record!r}",
+              file=sys.stderr)
+        return 2
+    if args.fleet is not None:
+        problem = ("N must be between 1 and 100" if not 1 <= args.fleet <= 100 else
+                   "is simulation only (--driver sim)" if args.driver not in (None, "sim") else
+                   "puts each robot in its own namespace (no --namespace)" if args.namespace else
+                   "takes -p overrides, not --params-file" if args.params_file else
+                   "runs headless (no --gui)" if args.gui else None)
+        if problem:
+            print(f"holonomic-bringup: --fleet {problem}", file=sys.stderr)
+            return 2
+        from holonomic_bringup.fleet import run_fleet
+        return run_fleet(args.robot, args.fleet, args.param, args.enable, args.record)
+    return node_main(["holonomic-bringup"] + ros, record=args.record)
 
 
 if __name__ == "__main__":

@@ -79,6 +79,9 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               default="slip_min", choices=ESTIMATORS),
     ParamSpec("odom_frame", "string", "Frame of the odometry (REP 105).", default="odom"),
     ParamSpec("base_frame", "string", "Frame of the base (REP 105).", default="base_link"),
+    ParamSpec("frame_prefix", "string",
+              "Prefix of odom_frame and base_frame, e.g. 'robot1/' for one robot of several "
+              "(holonomic-bringup --namespace NS sets 'NS/').", default=""),
     ParamSpec("publish_tf", "bool", "Publish odom -> base_link on /tf.", default=True),
     ParamSpec("cmd_vel_stamped", "bool",
               "Subscribe cmd_vel as geometry_msgs/TwistStamped instead of Twist.", default=False),

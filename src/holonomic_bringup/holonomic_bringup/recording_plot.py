@@ -1,0 +1,189 @@
+"""``holonomic-plot run.mcap``: figures of a recording made with
+``holonomic-bringup --record``.
+
+For each robot in the file (one per namespace): the path by odometry and by
+ground truth (simulator), the commanded, estimated and true body velocities
+over time, and -- for a powered-caster vehicle -- each caster's slip
+residual, recomputed from the recorded joint states with the robot's own
+model (its configuration is stored in the file). Prints a summary: duration,
+messages per topic, final odometry error against ground truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+
+def _yaw(q) -> float:
+    return 2.0 * math.atan2(q.z, q.w)
+
+
+def load(path: Path) -> tuple[dict, dict[str, list], dict[str, str]]:
+    """(robots: namespace -> flat config, topic -> [(t [s], msg)], topic -> type)."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    robots: dict[str, dict] = {}
+    series: dict[str, list] = defaultdict(list)
+    types: dict[str, str] = {}
+    with open(path, "rb") as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+        for record in reader.iter_metadata():
+            if record.name == "holonomic_robot":
+                doc = yaml.safe_load(record.metadata["config"])
+                robots[record.metadata["namespace"]] = doc["base_controller"]["ros__parameters"]
+        t0 = None
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            t = message.log_time * 1e-9
+            t0 = t if t0 is None else t0
+            series[channel.topic].append((t - t0, decoded))
+            types[channel.topic] = schema.name
+    return robots, series, types
+
+
+def _odom_arrays(samples):
+    t = np.array([s[0] for s in samples])
+    pose = np.array([(m.pose.pose.position.x, m.pose.pose.position.y,
+                      _yaw(m.pose.pose.orientation)) for _, m in samples])
+    twist = np.array([(m.twist.twist.linear.x, m.twist.twist.linear.y,
+                       m.twist.twist.angular.z) for _, m in samples])
+    return t, pose, twist
+
+
+def _cmd_arrays(samples):
+    t = np.array([s[0] for s in samples])
+    rows = []
+    for _, m in samples:
+        body = m.twist if hasattr(m, "header") else m
+        rows.append((body.linear.x, body.linear.y, body.angular.z))
+    return t, np.array(rows)
+
+
+def slip_residuals(flat: dict, samples) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Per-unit slip residuals [m/s] from joint_states samples, with the model
+    of ``flat``; empty for a base without redundancy (the DDROT)."""
+    from holonomic_core.model import build_model
+    model = build_model(flat)[0]
+    kin = model.kinematics
+    names = list(getattr(kin, "caster_names", ()))
+    if not names or not samples:
+        return np.zeros(0), np.zeros((0, 0)), names
+    estimator = flat.get("estimator", "slip_min")
+    order = None
+    t, rows = [], []
+    for stamp, m in samples:
+        if order is None:
+            order = [list(m.name).index(j) for j in model.joint_names]
+        q = np.asarray(m.position)[order]
+        v = np.asarray(m.velocity)[order]
+        rows.append(kin.fit_residual(q, v, estimator))
+        t.append(stamp)
+    return np.array(t), np.array(rows), names
+
+
+def plot_robot(ns: str, flat: dict, series: dict, out: Path, stem: str) -> tuple[list[Path], dict]:
+    """The figures of one robot; returns (paths, summary numbers)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    prefix = "" if ns == "/" else ns
+    name = flat.get("robot.name", "robot")
+    label = f"{name} ({ns})"
+    tag = stem + ("" if ns == "/" else "_" + ns.strip("/").replace("/", "_"))
+    figures, summary = [], {}
+    odom = series.get(f"{prefix}/odom", [])
+    truth = series.get(f"{prefix}/ground_truth/odom", [])
+    cmd = series.get(f"{prefix}/cmd_vel", [])
+    if odom:
+        t_o, pose_o, tw_o = _odom_arrays(odom)
+        fig, (ax, axv) = plt.subplots(1, 2, figsize=(13, 5.5))
+        ax.plot(pose_o[:, 0], pose_o[:, 1], "r--", label="odometry")
+        if truth:
+            t_g, pose_g, tw_g = _odom_arrays(truth)
+            ax.plot(pose_g[:, 0], pose_g[:, 1], "k-", lw=2, alpha=0.7, label="ground truth")
+            summary["final_position_error_m"] = float(np.hypot(*(pose_o[-1, :2] - pose_g[-1, :2])))
+            summary["final_heading_error_rad"] = abs(math.remainder(pose_o[-1, 2] - pose_g[-1, 2],
+                                                                    2 * math.pi))
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("x [m] (odom)")
+        ax.set_ylabel("y [m] (odom)")
+        ax.set_title(f"{label}: path")
+        ax.legend()
+        colors = ("tab:red", "tab:green", "tab:blue")
+        for i, comp in enumerate(("vx [m/s]", "vy [m/s]", "wz [rad/s]")):
+            axv.plot(t_o, tw_o[:, i], color=colors[i], label=f"odom {comp}")
+            if truth:
+                axv.plot(t_g, tw_g[:, i], color=colors[i], alpha=0.35, lw=3)
+            if cmd:
+                t_c, c = _cmd_arrays(cmd)
+                axv.step(t_c, c[:, i], where="post", color=colors[i], linestyle=":")
+        axv.set_xlabel("time [s]")
+        axv.set_title("body velocity: odometry (line), ground truth (thick), cmd_vel (dotted)",
+                      fontsize=9)
+        axv.legend(fontsize=8)
+        fig.tight_layout()
+        path = out / f"{tag}_motion.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        figures.append(path)
+    t_s, slip, units = slip_residuals(flat, series.get(f"{prefix}/joint_states", []))
+    if len(t_s):
+        fig, ax = plt.subplots(figsize=(10, 4))
+        for k, unit in enumerate(units):
+            ax.plot(t_s, 1e3 * slip[:, k], label=unit)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("slip residual [mm/s]")
+        ax.set_title(f"{label}: per-caster contact slip the odometry fit cannot explain")
+        ax.legend()
+        fig.tight_layout()
+        path = out / f"{tag}_slip.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        figures.append(path)
+        summary["max_slip_residual_m_s"] = float(slip.max())
+    return figures, summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="holonomic-plot", description=__doc__.split("\n")[0])
+    parser.add_argument("recording", type=Path, help="an MCAP file from holonomic-bringup --record")
+    parser.add_argument("--out", type=Path, help="folder of the PNGs (default: beside the file)")
+    args = parser.parse_args(argv)
+    if not args.recording.is_file():
+        print(f"holonomic-plot: no such file: {args.recording}", file=sys.stderr)
+        return 2
+    try:
+        robots, series, types = load(args.recording)
+    except Exception as exc:  # a truncated or foreign file: say so, no traceback
+        print(f"holonomic-plot: cannot read {args.recording} as an MCAP recording: {exc}",
+              file=sys.stderr)
+        return 2
+    if not robots:
+        print(f"holonomic-plot: {args.recording} has no robot (not made by "
+              "holonomic-bringup --record)", file=sys.stderr)
+        return 2
+    out = args.out or args.recording.parent
+    out.mkdir(parents=True, exist_ok=True)
+    duration = max((s[-1][0] for s in series.values() if s), default=0.0)
+    print(f"{args.recording}: {duration:.1f} s, {len(robots)} robot(s)")
+    for topic in sorted(series):
+        print(f"  {topic:40s} {types[topic]:36s} {len(series[topic]):6d} messages")
+    for ns, flat in robots.items():
+        figures, summary = plot_robot(ns, flat, series, out, args.recording.stem)
+        numbers = ", ".join(f"{k} {v:.4f}" for k, v in summary.items())
+        print(f"{ns}: {numbers or 'no odometry recorded'}")
+        for path in figures:
+            print(f"  wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

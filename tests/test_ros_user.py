@@ -1,0 +1,210 @@
+"""What a ROS user relies on around the base: recording and plotting,
+robot_description, several robots in one world, DDS domains, the launch
+file, and parameter docs that match the code."""
+
+from __future__ import annotations
+
+import ast
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+from ros_probe import Bringup, Probe, Teleop, claim_domain_id, relative_pose, wait_until
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def read_recording(path):
+    """(topic -> [decoded message], metadata records) of an MCAP file."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    topics: dict[str, list] = {}
+    with open(path, "rb") as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+        meta = [m for m in reader.iter_metadata()]
+        for _, channel, _, msg in reader.iter_decoded_messages():
+            topics.setdefault(channel.topic, []).append(msg)
+    return topics, meta
+
+
+def run(*argv, timeout=120):
+    return subprocess.run(list(argv), capture_output=True, text=True, timeout=timeout)
+
+
+# -- recording, plotting, robot_description ----------------------------------------------------
+def test_recording_holds_every_topic_and_the_plot_reads_it(ros, tmp_path):
+    bag = tmp_path / "run.mcap"
+    robot = Bringup(["xr4000", "--namespace", "rec", "--enable", "--record", str(bag)],
+                    tmp_path / "bringup.log")
+    probe = Probe(ros, "rec")
+    got = []
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    try:
+        probe.wait_ready()
+        probe.drive((0.3, 0.2, 0.4), 2.0)
+        probe.wait_at_rest()
+        # a subscriber that comes late still gets the URDF (latched)
+        sub = ros.create_subscription(String, "/rec/robot_description", got.append, latched)
+        wait_until(lambda: got, 10, "robot_description")
+        ros.destroy_subscription(sub)
+    finally:
+        probe.close()
+        assert robot.stop() == 0, robot.log()
+    urdf = got[0].data
+    assert urdf.startswith("<?xml") or "<robot" in urdf
+    assert all(f'joint name="{j}"' in urdf for j in ("front_left_steer_joint",
+                                                      "rear_right_wheel_joint"))
+
+    topics, meta = read_recording(bag)
+    for topic in ("/rec/cmd_vel", "/rec/odom", "/tf", "/rec/joint_states",
+                  "/rec/ground_truth/odom", "/rec/diagnostics", "/rec/robot_description"):
+        assert topics.get(topic), f"{topic} not recorded: {sorted(topics)}"
+    assert any(abs(m.linear.y - 0.2) < 1e-9 for m in topics["/rec/cmd_vel"])
+    odom = topics["/rec/odom"]
+    assert len(odom) > 50 and odom[-1].pose.pose.position.x > 0.3
+    assert topics["/tf"][-1].transforms[0].child_frame_id == "rec/base_link"
+    assert topics["/rec/joint_states"][-1].name[0] == "front_left_steer_joint"
+    assert [m.name for m in meta] == ["holonomic_robot"]
+    assert "xr4000" in meta[0].metadata["config"]
+
+    out = tmp_path / "plots"
+    proc = run(sys.executable, "-c", "import sys; from holonomic_bringup.recording_plot "
+               "import main; sys.exit(main(sys.argv[1:]))", str(bag), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "final_position_error_m" in proc.stdout and "max_slip_residual_m_s" in proc.stdout
+    for name in ("run_rec_motion.png", "run_rec_slip.png"):
+        assert (out / name).stat().st_size > 20_000
+
+
+def test_plot_refuses_a_file_that_is_not_a_recording(tmp_path):
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"\x89MCAP0\r\n" + os.urandom(200))
+    code = "import sys; from holonomic_bringup.recording_plot import main; sys.exit(main(sys.argv[1:]))"
+    for path in (junk, tmp_path / "missing.mcap"):
+        proc = run(sys.executable, "-c", code, str(path))
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+        assert str(path) in proc.stderr
+
+
+# -- several robots ------------------------------------------------------------------------
+def test_a_fleet_of_three_in_one_world_each_obeys_only_its_own_cmd_vel(ros, tmp_path):
+    bag = tmp_path / "fleet.mcap"
+    fleet = Bringup(["hamr", "--fleet", "3", "--enable", "--record", str(bag)],
+                    tmp_path / "fleet.log")
+    probes = {k: Probe(ros, f"robot{k}") for k in (1, 2, 3)}
+    try:
+        for probe in probes.values():
+            probe.wait_ready()
+        starts = {k: p.latest_truth().pose for k, p in probes.items()}
+        probes[2].drive((0.0, 0.4, 0.0), 1.5)         # strafe robot2 only
+        probes[3].drive((0.4, 0.0, 0.0), 1.0)         # then robot3 forward
+        for probe in probes.values():
+            probe.wait_at_rest()
+        moved = {k: relative_pose(starts[k], p.latest_truth().pose) for k, p in probes.items()}
+        assert np.linalg.norm(moved[1][:2]) < 0.005, moved
+        assert moved[2][1] > 0.4 and abs(moved[2][0]) < 0.03, moved
+        assert moved[3][0] > 0.25 and abs(moved[3][1]) < 0.03, moved
+        # each odometry follows its own robot
+        for k, p in probes.items():
+            assert np.linalg.norm(p.latest_odom().pose[:2] - p.latest_truth().pose[:2]) < 0.02
+        # and every service is the robot's own
+        assert probes[2].enable(False).success
+        probes[2].drive((0.4, 0.0, 0.0), 0.5)
+        probes[3].drive((0.4, 0.0, 0.0), 0.5)
+        probes[3].wait_at_rest()
+        assert np.linalg.norm(probes[2].latest_truth().twist) < 1e-3
+    finally:
+        for probe in probes.values():
+            probe.close()
+        assert fleet.stop() == 0, fleet.log()
+    topics, meta = read_recording(bag)
+    assert [m.metadata["namespace"] for m in meta] == ["/robot1", "/robot2", "/robot3"]
+    frames = {t.transforms[0].header.frame_id for t in topics["/tf"]}
+    assert frames == {"robot1/odom", "robot2/odom", "robot3/odom"}
+
+
+def test_fleet_arguments_that_make_no_sense_are_refused(tmp_path):
+    for extra, words in ((["--fleet", "0"], "between 1 and 100"),
+                         (["--fleet", "2", "--driver", "mock"], "simulation only"),
+                         (["--fleet", "2", "--namespace", "x"], "own namespace")):
+        proc = run(sys.executable, "-c", "import sys; from holonomic_bringup.bringup import "
+                   "main; sys.exit(main(sys.argv[1:]))", "hamr", *extra)
+        assert proc.returncode == 2 and words in proc.stderr, proc.stderr
+
+
+# -- DDS domains -------------------------------------------------------------------------------
+def test_teleop_in_the_robots_domain_drives_it_and_another_domain_cannot(ros, tmp_path):
+    """Two processes in one domain talk (teleop -> robot); a publisher in
+    another domain (this test process) is not heard."""
+    other = str(claim_domain_id())
+    bag = tmp_path / "other.mcap"
+    robot = Bringup(["hamr", "--namespace", "dom", "--enable", "--record", str(bag)],
+                    tmp_path / "robot.log", env={"ROS_DOMAIN_ID": other})
+    probe = Probe(ros, "dom")                        # this process: the test's own domain
+    teleop = None
+    try:
+        time.sleep(4.0)                              # the robot is up (in its domain)
+        assert probe.cmd_pub.get_subscription_count() == 0
+        probe.drive((0.5, 0.0, 0.0), 1.5)            # unheard
+        env_before = os.environ["ROS_DOMAIN_ID"]
+        os.environ["ROS_DOMAIN_ID"] = other          # the teleop process inherits it
+        try:
+            teleop = Teleop("--namespace", "dom", "--speed", "0.4")
+        finally:
+            os.environ["ROS_DOMAIN_ID"] = env_before
+        time.sleep(3.0)                              # discovery
+        teleop.hold("J", 2.0)
+        time.sleep(1.5)
+    finally:
+        if teleop is not None:
+            assert teleop.stop() == 0
+        probe.close()
+        assert robot.stop() == 0, robot.log()
+    topics, _ = read_recording(bag)
+    commands = topics.get("/dom/cmd_vel", [])
+    assert commands and all(m.linear.x == 0.0 for m in commands)   # none from this domain
+    assert any(m.linear.y == pytest.approx(0.4) for m in commands)  # the teleop's strafe
+    truth = topics["/dom/ground_truth/odom"][-1].pose.pose.position
+    assert truth.y > 0.5 and abs(truth.x) < 0.05, (truth.x, truth.y)
+
+
+# -- full-ROS launch file, parameter docs ------------------------------------------------------
+def test_launch_file_mirrors_the_bringup_arguments():
+    path = ROOT / "src" / "holonomic_bringup" / "launch" / "bringup.launch.py"
+    tree = ast.parse(path.read_text())
+    functions = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+    assert "generate_launch_description" in functions
+    args = next(n for n in tree.body if isinstance(n, ast.Assign)
+                and getattr(n.targets[0], "id", "") == "ARGUMENTS")
+    names = {elt.elts[0].value for elt in args.value.elts}
+    assert names == {"robot", "driver", "namespace", "params_file", "enable"}
+    from holonomic_bringup.bringup import parse_args
+    bringup = parse_args(["hamr", "--driver", "mock", "--namespace", "n",
+                          "--params-file", "f.yaml", "--enable"])
+    assert {"driver", "namespace", "params_file", "enable", "robot"} <= set(vars(bringup))
+    try:
+        import launch_ros  # noqa: F401  (only on a full ROS install)
+    except ImportError:
+        return
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("bringup_launch", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.generate_launch_description().entities
+
+
+def test_parameter_tables_in_the_readme_match_the_schema():
+    proc = run(sys.executable, str(ROOT / "scripts" / "param_docs.py"), "--check")
+    assert proc.returncode == 0, proc.stderr
+    readme = (ROOT / "src" / "holonomic_bringup" / "README.md").read_text()
+    for key in ("`frame_prefix`", "`cmd_vel_stamped`", "`sim.start_pose`",
+                "`odrive_can.heartbeat_timeout`", "`pcv.NAME.beta`"):
+        assert key in readme
