@@ -4,11 +4,12 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := . ros2_ws/env.sh &&
 
-.PHONY: help setup demo test clean
+.PHONY: help setup demo test bench clean
 
 help:
 	@echo "make demo   set up, then drive the simulated HAMR headless; prints a table, writes a plot"
 	@echo "make test   set up, then run the whole test suite"
+	@echo "make bench  set up, then run the benchmarks (about 8 min); writes docs/benchmarks.md"
 	@echo "make setup  only set up .venv/ and build ros2_ws/"
 	@echo "make clean  remove .venv/, ros2_ws/ and out/"
 
@@ -20,6 +21,9 @@ demo: setup
 
 test: setup
 	@$(ENV) python -m pytest tests -q $(PYTEST_ARGS)
+
+bench: setup
+	@$(ENV) python bench/run.py $(BENCH_ARGS)
 
 clean:
 	rm -rf .venv ros2_ws out .pytest_cache .hypothesis

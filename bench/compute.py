@@ -72,24 +72,55 @@ def _time_cycles(fn, cycles: int) -> np.ndarray:
 
 
 def cycle_compute(robot: str, cycles: int = 100_000) -> dict:
-    """Median [us] of our full control cycle (BaseController.step with the
-    mock driver: read, plausibility checks, odometry, limits, IK, saturation,
-    write) and of the baseline, measured in alternating blocks."""
+    """Median [us] per cycle, in alternating blocks of the same run, of
+
+    * ``compute``: the work the baseline does -- twist limits, exact inverse
+      kinematics, joint-rate saturation, odometry (slip_min fit, SE(2)
+      composition, covariance) -- with our classes;
+    * ``baseline``: the same work written the straightforward way
+      (:class:`BaselineCycle`: numpy pinv of C and fresh arrays every cycle);
+    * ``full_cycle``: ``BaseController.step`` with the mock driver (driver
+      read and write, plausibility checks, command timeout, all of the above).
+    """
+    from holonomic_core.limits import TwistLimiter, saturate_joint_rates
+    from holonomic_core.odometry import Odometry
+
     cfg = load_config(robot, {"driver": "mock", "cmd_timeout": 0.0})
+    c = cfg.controller
+    model = cfg.model
+    n = len(model.joint_names)
+    rng = np.random.default_rng(0)
+    targets = rng.uniform(-1.0, 1.0, (1024, 3)) * np.array(c.max_velocity)
+    qs = np.cumsum(rng.uniform(-0.01, 0.01, (1024, n)), axis=0)   # a smooth encoder walk
+    dqs = np.diff(qs, axis=0, prepend=qs[:1])
+    dt = 1.0 / c.control_rate
+
+    limiter = TwistLimiter(c.max_velocity, c.max_acceleration, c.max_deceleration)
+    kin, max_rates = model.kinematics, model.max_joint_velocity
+    odometry = Odometry(model, c.estimator, c.noise)
+    state = {"prev": np.zeros(3)}
+
+    def compute(i):
+        k = i & 1023
+        twist = limiter.limit(targets[k], state["prev"], dt)
+        rates, _ = saturate_joint_rates(kin.inverse(qs[k], twist), max_rates)
+        odometry.update(qs[k], i * dt)
+        state["prev"] = twist
+
+    base = BaselineCycle(cfg)
+
+    def baseline(i):
+        k = i & 1023
+        base.step(qs[k], dqs[k], targets[k])
+
     clock = _Clock()
-    driver = MockDriver(cfg.model, cfg.values, cfg.controller.control_rate, clock=clock)
+    driver = MockDriver(model, cfg.values, c.control_rate, clock=clock)
     driver.configure()
     ctrl = BaseController(cfg, driver, clock=clock)
     ctrl.request_enable(True)
     ctrl.step()
-    rng = np.random.default_rng(0)
-    targets = rng.uniform(-1.0, 1.0, (1024, 3)) * np.array(cfg.controller.max_velocity)
-    n = len(cfg.model.joint_names)
-    qs = rng.uniform(-math.pi, math.pi, (1024, n))
-    dqs = rng.uniform(-0.01, 0.01, (1024, n))
-    base = BaselineCycle(cfg)
 
-    def ours(i):
+    def full(i):
         # the command arrives from the ROS thread, outside the cycle: here it
         # changes every 64 cycles (e.g. a 3 Hz teleop at 200 Hz)
         if i & 63 == 0:
@@ -97,23 +128,23 @@ def cycle_compute(robot: str, cycles: int = 100_000) -> dict:
         clock.t += ctrl.dt
         ctrl.step()
 
-    def baseline(i):
-        base.step(qs[i & 1023], dqs[i & 1023], targets[i & 1023])
-
     block = 5000
-    ours_t, base_t = [], []
+    times = {"compute": [], "baseline": [], "full_cycle": []}
     for _ in range(max(1, cycles // block)):
-        ours_t.append(_time_cycles(ours, block))
-        base_t.append(_time_cycles(baseline, block))
-    ours_us = float(np.median(np.concatenate(ours_t)))
-    base_us = float(np.median(np.concatenate(base_t)))
-    return {"robot": robot, "joints": n, "ours_us": ours_us, "baseline_us": base_us,
-            "speedup": base_us / ours_us, "cycles": cycles}
+        for name, fn in (("compute", compute), ("baseline", baseline), ("full_cycle", full)):
+            times[name].append(_time_cycles(fn, block))
+    med = {k: float(np.median(np.concatenate(v))) for k, v in times.items()}
+    if ctrl.fault:
+        raise RuntimeError(f"{robot}: the controller faulted during the benchmark: {ctrl.fault}")
+    return {"robot": robot, "joints": n, "compute_us": med["compute"],
+            "baseline_us": med["baseline"], "full_cycle_us": med["full_cycle"],
+            "speedup": med["baseline"] / med["compute"], "cycles": cycles}
 
 
-def simulation_speed(robot: str, seconds: float = 10.0) -> dict:
+def simulation_speed(robot: str, seconds: float = 10.0, blocks: int = 20) -> dict:
     """Real-time factor of the simulator with the controller in the loop, and
-    of raw pybullet stepping of the same generated robot, same run."""
+    of raw pybullet stepping of the same generated robot in the same world,
+    in alternating blocks (``seconds`` of simulated time each way)."""
     from holonomic_sim.sim_driver import SimDriver
 
     cfg = load_config(robot, {"cmd_timeout": 0.0, "sim.physics_rate": 1000.0})
@@ -123,19 +154,23 @@ def simulation_speed(robot: str, seconds: float = 10.0) -> dict:
     ctrl = BaseController(cfg, driver, clock=clock)
     ctrl.request_enable(True)
     ctrl.step()
-    steps = int(seconds * cfg.controller.control_rate)
-    twist = (0.3, 0.2, 0.5)
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        ctrl.set_command(twist)
-        ctrl.step()
-        clock.t = ctrl.reading.stamp
-    with_controller = seconds / (time.perf_counter() - t0)
+    cycles = max(1, int(seconds * cfg.controller.control_rate / blocks))
     world = driver._world
-    t0 = time.perf_counter()
-    world.step(steps * driver.substeps)
-    raw = seconds / (time.perf_counter() - t0)
+    twist = (0.3, 0.2, 0.5)
+    spent = {"controller": 0.0, "raw": 0.0}
+    for _ in range(blocks):
+        t0 = time.perf_counter()
+        for _ in range(cycles):
+            ctrl.set_command(twist)
+            ctrl.step()
+            clock.t = ctrl.reading.stamp
+        spent["controller"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        world.step(cycles * driver.substeps)
+        spent["raw"] += time.perf_counter() - t0
     driver.close()
+    simulated = blocks * cycles / cfg.controller.control_rate
+    with_controller, raw = simulated / spent["controller"], simulated / spent["raw"]
     return {"robot": robot, "with_controller_x": with_controller, "raw_pybullet_x": raw,
             "ratio": with_controller / raw}
 

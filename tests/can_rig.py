@@ -9,6 +9,7 @@ and records when each cycle started.
 
 from __future__ import annotations
 
+import gc
 import itertools
 import os
 import struct
@@ -31,6 +32,12 @@ def unique_channel(tag: str) -> str:
 
 class CanRig:
     def __init__(self, backend: str, robot: str = "hamr", **overrides):
+        # The emulated drives and the controller share this (large, long-lived)
+        # test process: a full garbage collection here can pause both for tens
+        # of ms and trip the drivers' feedback timeouts. The node freezes its
+        # own start-up objects for the same reason (base_controller_node.main).
+        gc.collect()
+        gc.freeze()
         self.backend = backend
         self.channel = unique_channel(backend)
         params = {"driver": backend, f"{backend}.interface": "virtual",

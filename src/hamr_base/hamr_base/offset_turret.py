@@ -46,6 +46,9 @@ from holonomic_core.schema import ConfigError, ParamSpec
 LEFT_WHEEL = "left_wheel_joint"
 RIGHT_WHEEL = "right_wheel_joint"
 TURRET = "turret_joint"
+#: the residual of an exactly determined fit (read-only, shared)
+_NO_RESIDUAL = np.zeros(0)
+_NO_RESIDUAL.flags.writeable = False
 
 
 def _positive(name: str, description: str, default=None, maximum=100.0) -> ParamSpec:
@@ -106,6 +109,11 @@ class OffsetTurretKinematics(BaseKinematics):
         return np.array([v * c + self.b * wd * s,
                          -v * s + self.b * wd * c,
                          wd + dphi])
+
+    def estimate(self, positions: np.ndarray, velocities: np.ndarray,
+                 estimator: str = "slip_min") -> tuple[np.ndarray, np.ndarray]:
+        """(twist, residual): exact, so the residual is always empty."""
+        return self.forward(positions, velocities, estimator), _NO_RESIDUAL
 
     def jacobian(self, positions: np.ndarray) -> np.ndarray:
         """J_joint_to_base (3x3): twist = J @ (wL, wR, phi_dot)."""

@@ -11,6 +11,7 @@ only. The first robot publishes ``/clock``.
 
 from __future__ import annotations
 
+import gc
 import sys
 
 import rclpy
@@ -88,6 +89,10 @@ def run_fleet(robot: str, count: int, params: list[str], enable: bool,
             nodes.append(node)
             executor.add_node(node)
         world.settle()
+        # as base_controller_node.main(): the GIL back to the loop sooner,
+        # and the long-lived objects out of the garbage collector's way
+        sys.setswitchinterval(min(5e-4, 0.2 / cfg.controller.control_rate))
+        gc.freeze()
         substeps = round(cfg.values["sim.physics_rate"] / cfg.controller.control_rate)
 
         def cycle() -> None:

@@ -267,12 +267,17 @@ class BaseController:
         """
         now = self._clock() if received is None else received
         try:
-            parts = [twist[0], twist[1], twist[2]]
-            values = np.array([float(v) for v in parts]) if all(
-                isinstance(v, numbers.Real) and not isinstance(v, bool) for v in parts) else None
-        except (TypeError, ValueError, IndexError, KeyError):
+            parts = (twist[0], twist[1], twist[2])
+            # fast path for plain floats (every ROS message); the ABC check
+            # (numpy scalars, ints; never bools) only for the rest
+            if all(type(v) is float for v in parts) or all(
+                    isinstance(v, numbers.Real) and not isinstance(v, bool) for v in parts):
+                values = np.array([float(v) for v in parts])
+            else:
+                values = None
+        except (TypeError, ValueError, OverflowError, IndexError, KeyError):
             values = None
-        if values is None or not is_finite_twist(values):
+        if values is None or not is_finite_twist(values.tolist()):
             self.counters["rejected_commands"] += 1
             self._command = (_ZERO3, now)
             what = "non-finite" if values is not None else "malformed"

@@ -39,6 +39,11 @@ class TwistLimiter:
                           ("max_deceleration", self.max_deceleration)):
             if arr.shape != (3,) or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
                 raise ValueError(f"TwistLimiter {name} must be 3 finite numbers > 0, got {arr}")
+        # the per-cycle arithmetic runs on Python floats (numpy scalar access
+        # costs more than the arithmetic on three numbers)
+        self._vmax = tuple(self.max_velocity.tolist())
+        self._amax = tuple(self.max_acceleration.tolist())
+        self._dmax = tuple(self.max_deceleration.tolist())
 
     def limit_velocity(self, twist: np.ndarray) -> tuple[np.ndarray, float]:
         """Scale ``twist`` so every axis is within its speed limit.
@@ -46,10 +51,10 @@ class TwistLimiter:
         Returns (limited twist, scale in (0, 1]).
         """
         scale = 1.0
-        for i in range(3):
-            mag = abs(twist[i])
-            if mag > self.max_velocity[i]:
-                scale = min(scale, self.max_velocity[i] / mag)
+        for value, vmax in zip(twist.tolist(), self._vmax):
+            mag = abs(value)
+            if mag > vmax:
+                scale = min(scale, vmax / mag)
         return (twist * scale if scale < 1.0 else twist.copy()), scale
 
     def limit_acceleration(self, target: np.ndarray, previous: np.ndarray, dt: float) -> np.ndarray:
@@ -59,17 +64,19 @@ class TwistLimiter:
         its acceleration (growing speed) or deceleration (slowing or
         reversing) limit times ``dt``.
         """
-        delta = target - previous
+        tgt, prev = target.tolist(), previous.tolist()
         scale = 1.0
         for i in range(3):
-            change = abs(delta[i])
+            change = abs(tgt[i] - prev[i])
             if change == 0.0:
                 continue
-            growing = abs(target[i]) > abs(previous[i]) and target[i] * previous[i] >= 0.0
-            step = (self.max_acceleration[i] if growing else self.max_deceleration[i]) * dt
+            growing = abs(tgt[i]) > abs(prev[i]) and tgt[i] * prev[i] >= 0.0
+            step = (self._amax[i] if growing else self._dmax[i]) * dt
             if change > step:
                 scale = min(scale, step / change)
-        return previous + delta * scale
+        if scale == 1.0:
+            return np.array(tgt)
+        return np.array([p + (g - p) * scale for g, p in zip(tgt, prev)])
 
     def limit(self, target: np.ndarray, previous: np.ndarray, dt: float) -> np.ndarray:
         """Speed limits, then acceleration limits, on ``target`` given the last output."""
@@ -85,7 +92,7 @@ def saturate_joint_rates(rates: np.ndarray, max_rates: np.ndarray) -> tuple[np.n
     rates, never motion.
     """
     worst = 0.0
-    for value, limit in zip(rates, max_rates):
+    for value, limit in zip(rates.tolist(), max_rates.tolist()):
         ratio = abs(value) / limit
         if not math.isfinite(ratio):
             return np.zeros_like(rates), 0.0
@@ -99,4 +106,5 @@ def saturate_joint_rates(rates: np.ndarray, max_rates: np.ndarray) -> tuple[np.n
 
 def is_finite_twist(twist) -> bool:
     """True when all three components are finite numbers."""
-    return all(math.isfinite(float(v)) for v in twist)
+    x, y, z = twist
+    return math.isfinite(x) and math.isfinite(y) and math.isfinite(z)

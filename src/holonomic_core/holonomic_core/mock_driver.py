@@ -31,6 +31,7 @@ class MockDriver(Driver):
         self._no_efforts = np.full(n, np.nan)
         self._no_efforts.flags.writeable = False
         self._last = 0.0
+        self._max_rates = model.max_joint_velocity
 
     def _on_configure(self) -> None:
         self._last = self._clock()
@@ -47,5 +48,4 @@ class MockDriver(Driver):
         return JointReading(now, self._positions.copy(), velocities, self._no_efforts)
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
-        self._command[:] = np.clip(velocities, -self.model.max_joint_velocity,
-                                   self.model.max_joint_velocity)
+        np.clip(velocities, -self._max_rates, self._max_rates, out=self._command)

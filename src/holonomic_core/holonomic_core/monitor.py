@@ -12,6 +12,7 @@ odometry.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,13 +48,14 @@ class ReadingMonitor:
         self.max_velocity = np.asarray(max_velocity, float)
         self.period = float(period)
         self.limits = limits
-        self._bound = limits.velocity_factor * self.max_velocity
-        self._tracking_bound = limits.tracking_error * self.max_velocity
+        # per-cycle checks run on Python floats (cheaper than numpy on n <= 16)
+        self._bound = (limits.velocity_factor * self.max_velocity).tolist()
+        self._tracking_bound = (limits.tracking_error * self.max_velocity).tolist()
         self.reset()
 
     def reset(self) -> None:
         """Forget the reference sample (after a fault is cleared, or re-arming)."""
-        self._last_positions: np.ndarray | None = None
+        self._last_positions: list[float] | None = None
         self._last_stamp: float | None = None
         self._stamp_changed_at: float | None = None
         self._tracking_since: float | None = None
@@ -71,42 +73,43 @@ class ReadingMonitor:
         if positions.shape != (n,) or velocities.shape != (n,):
             return (f"driver returned {positions.shape[0] if positions.ndim else 0} positions and "
                     f"{velocities.shape[0] if velocities.ndim else 0} velocities for {n} joints")
-        # fast path first: one vectorised test per check, details on failure
-        if not (np.isfinite(positions).all() and np.isfinite(velocities).all()):
-            for values, what in ((positions, "position"), (velocities, "velocity")):
-                bad = np.flatnonzero(~np.isfinite(values))
-                if bad.size:
-                    return (f"{self.joint_names[bad[0]]}: non-finite {what} reading "
-                            f"({values[bad[0]]})")
+        pos, vel = positions.tolist(), velocities.tolist()
+        isfinite = math.isfinite
+        for i in range(n):
+            if not isfinite(pos[i]):
+                return f"{self.joint_names[i]}: non-finite position reading ({pos[i]})"
+            if not isfinite(vel[i]):
+                return f"{self.joint_names[i]}: non-finite velocity reading ({vel[i]})"
         bound = self._bound
-        if (np.abs(velocities) > bound).any():
-            i = int(np.argmax(np.abs(velocities) - bound))
-            return (f"{self.joint_names[i]}: velocity reading {velocities[i]:.4g} rad/s is over "
-                    f"{self.limits.velocity_factor:g}x its limit ({self.max_velocity[i]:g} rad/s): "
-                    "encoder glitch")
+        for i in range(n):
+            if abs(vel[i]) > bound[i]:
+                return (f"{self.joint_names[i]}: velocity reading {vel[i]:.4g} rad/s is over "
+                        f"{self.limits.velocity_factor:g}x its limit "
+                        f"({self.max_velocity[i]:g} rad/s): encoder glitch")
         if self._last_positions is not None:
             dt = reading.stamp - self._last_stamp
             if dt < 0.0:
                 # the clock restarted (simulation reset): a new reference
-                self._accept(positions, reading.stamp, now)
+                self._accept(pos, reading.stamp, now)
                 return None
-            allowed = bound * max(dt, self.period) + 1e-6
-            jump = np.abs(positions - self._last_positions)
-            if (jump > allowed).any():
-                i = int(np.argmax(jump - allowed))
-                return (f"{self.joint_names[i]}: position jumped by {jump[i]:.4g} rad in "
-                        f"{dt:.4g} s: encoder glitch")
+            span = max(dt, self.period)
+            last = self._last_positions
+            for i in range(n):
+                jump = abs(pos[i] - last[i])
+                if jump > bound[i] * span + 1e-6:
+                    return (f"{self.joint_names[i]}: position jumped by {jump:.4g} rad in "
+                            f"{dt:.4g} s: encoder glitch")
             if dt == 0.0:
                 frozen = now - self._stamp_changed_at
                 if self.limits.reading_timeout > 0.0 and frozen > self.limits.reading_timeout:
                     return f"joint readings stopped updating {frozen:.3f} s ago"
                 return None
-        problem = self._check_tracking(velocities, now, command)
-        self._accept(positions, reading.stamp, now)
+        problem = self._check_tracking(vel, now, command)
+        self._accept(pos, reading.stamp, now)
         return problem
 
-    def _accept(self, positions, stamp, now) -> None:
-        self._last_positions = positions.copy()
+    def _accept(self, positions: list, stamp, now) -> None:
+        self._last_positions = positions
         self._last_stamp = stamp
         self._stamp_changed_at = now
 
@@ -114,8 +117,10 @@ class ReadingMonitor:
         if command is None or self.limits.tracking_timeout <= 0.0:
             self._tracking_since = None
             return None
-        excess = np.abs(command - velocities) - self._tracking_bound
-        if not (excess > 0.0).any():
+        excess = [abs(c - v) - b
+                  for c, v, b in zip(command.tolist(), velocities, self._tracking_bound)]
+        worst = max(excess)
+        if not worst > 0.0:
             self._tracking_since = None
             return None
         if self._tracking_since is None:
@@ -123,7 +128,7 @@ class ReadingMonitor:
             return None
         if now - self._tracking_since < self.limits.tracking_timeout:
             return None
-        i = int(np.argmax(excess))
+        i = excess.index(worst)
         return (f"{self.joint_names[i]}: cannot follow its command ({command[i]:.3g} rad/s "
                 f"commanded, {velocities[i]:.3g} rad/s measured for "
                 f"{now - self._tracking_since:.2f} s): motor saturated or blocked")

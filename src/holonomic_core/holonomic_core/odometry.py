@@ -31,7 +31,7 @@ def wrap_angle(angle: float) -> float:
     return math.remainder(angle, 2.0 * math.pi)
 
 
-def compose_arc(pose: np.ndarray, dx: float, dy: float, dtheta: float) -> tuple[float, float]:
+def compose_arc(pose, dx: float, dy: float, dtheta: float) -> tuple[float, float]:
     """World-frame displacement of a constant-twist arc.
 
     The body moves by ``(dx, dy, dtheta)`` integrated as a constant body
@@ -90,13 +90,25 @@ class Odometry:
         """
         self.pose = np.array(pose, dtype=float)
         self.twist = np.zeros(3)
-        self.pose_covariance = np.zeros((3, 3))
-        self.twist_covariance = self._base_twist_cov.copy()
+        # upper triangle (p00, p01, p02, p11, p12, p22) as Python floats: the
+        # per-cycle update is scalar; the matrix is built when read
+        self._P = (0.0,) * 6
         self.residual = np.zeros(0)
         self.slip_factor = 1.0
         self.distance = 0.0
         self._last_positions: np.ndarray | None = None
         self._last_stamp: float | None = None
+
+    @property
+    def pose_covariance(self) -> np.ndarray:
+        """Covariance (3 x 3) of (x, y, yaw) in odom [m^2, m rad, rad^2]."""
+        p00, p01, p02, p11, p12, p22 = self._P
+        return np.array([[p00, p01, p02], [p01, p11, p12], [p02, p12, p22]])
+
+    @property
+    def twist_covariance(self) -> np.ndarray:
+        """Covariance (3 x 3) of the reported twist, scaled by the slip factor."""
+        return self._base_twist_cov * self.slip_factor
 
     def rebase(self) -> None:
         """Keep the pose; take the next reading as the new encoder reference
@@ -112,7 +124,8 @@ class Odometry:
         nothing was integrated (first reading, or non-finite positions, which
         are skipped and do not become the reference).
         """
-        if not np.all(np.isfinite(positions)):
+        # one reduction: any nan or +-inf makes the sum non-finite
+        if not math.isfinite(float(np.add.reduce(positions))):
             return False
         if self._last_positions is None:
             self._last_positions = np.array(positions, dtype=float)
@@ -134,12 +147,10 @@ class Odometry:
         return True
 
     def _integrate(self, disp: np.ndarray) -> None:
-        dx, dy, dth = float(disp[0]), float(disp[1]), float(disp[2])
-        wx, wy = compose_arc(self.pose, dx, dy, dth)
-        heading = self.pose[2]
-        self.pose[0] += wx
-        self.pose[1] += wy
-        self.pose[2] = wrap_angle(heading + dth)
+        dx, dy, dth = disp.tolist()
+        x, y, heading = self.pose.tolist()
+        wx, wy = compose_arc((x, y, heading), dx, dy, dth)
+        self.pose[:] = (x + wx, y + wy, wrap_angle(heading + dth))
         # Covariance: P' = F P F^T + G Q G^T, F = d(pose')/d(pose), G maps
         # body-frame increment noise to the odom frame.
         dist = math.hypot(dx, dy)
@@ -156,17 +167,13 @@ class Odometry:
         # rest of the control cycle.
         k = self.slip_factor
         a, b = -wy, wx
-        P = self.pose_covariance
-        p00, p01, p02, p11, p12, p22 = P[0, 0], P[0, 1], P[0, 2], P[1, 1], P[1, 2], P[2, 2]
-        n00 = p00 + 2.0 * a * p02 + a * a * p22 + k * var_lin
-        n01 = p01 + a * p12 + b * p02 + a * b * p22
-        n02 = p02 + a * p22
-        n11 = p11 + 2.0 * b * p12 + b * b * p22 + k * var_lin
-        n12 = p12 + b * p22
-        n22 = p22 + k * var_ang
-        P[0, 0], P[0, 1], P[0, 2] = n00, n01, n02
-        P[1, 0], P[1, 1], P[1, 2] = n01, n11, n12
-        P[2, 0], P[2, 1], P[2, 2] = n02, n12, n22
+        p00, p01, p02, p11, p12, p22 = self._P
+        self._P = (p00 + 2.0 * a * p02 + a * a * p22 + k * var_lin,
+                   p01 + a * p12 + b * p02 + a * b * p22,
+                   p02 + a * p22,
+                   p11 + 2.0 * b * p12 + b * b * p22 + k * var_lin,
+                   p12 + b * p22,
+                   p22 + k * var_ang)
 
     def _update_slip(self, residual: np.ndarray) -> None:
         """Scale the covariances by the slip the estimator could not explain.
@@ -179,5 +186,4 @@ class Odometry:
         self.residual = residual
         self.slip_factor = 1.0
         if residual.size:
-            self.slip_factor = 1.0 + (float(np.max(residual)) / SLIP_SCALE) ** 2
-        self.twist_covariance = self._base_twist_cov * self.slip_factor
+            self.slip_factor = 1.0 + (max(residual.tolist()) / SLIP_SCALE) ** 2

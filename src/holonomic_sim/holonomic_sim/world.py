@@ -82,6 +82,9 @@ class SimRobot:
         self.joint_indices = [joints_by_name[name] for name in model.joint_names]
         self.max_velocity = model.max_joint_velocity
         self.max_effort = np.array([j.max_effort for j in model.joint_limits])
+        # per-cycle calls take Python lists: built once
+        self._vmax = self.max_velocity.tolist()
+        self._forces = self.max_effort.tolist()
         # No artificial drag: pybullet's default link damping slows every body.
         for link in [-1] + list(links_by_name.values()):
             pb.changeDynamics(self.body, link, linearDamping=0.0, angularDamping=0.0,
@@ -104,11 +107,11 @@ class SimRobot:
     # -- motors -----------------------------------------------------------------
     def command_velocities(self, velocities: np.ndarray) -> None:
         """Target joint speeds [rad/s], clipped to the speed limits."""
-        target = np.clip(np.asarray(velocities, float), -self.max_velocity, self.max_velocity)
+        target = [min(v, m) if v > -m else -m
+                  for v, m in zip(np.asarray(velocities, float).tolist(), self._vmax)]
         self._torque_mode = False
         pb.setJointMotorControlArray(self.body, self.joint_indices, pb.VELOCITY_CONTROL,
-                                     targetVelocities=target.tolist(),
-                                     forces=self.max_effort.tolist(),
+                                     targetVelocities=target, forces=self._forces,
                                      physicsClientId=self.world.client)
 
     def command_efforts(self, efforts: np.ndarray) -> None:
@@ -137,9 +140,10 @@ class SimRobot:
         """Positions [rad], velocities [rad/s] and motor torques [N m]."""
         states = pb.getJointStates(self.body, self.joint_indices,
                                    physicsClientId=self.world.client)
-        positions = np.array([s[0] for s in states])
-        velocities = np.array([s[1] for s in states])
-        efforts = self._efforts.copy() if self._torque_mode else np.array([s[3] for s in states])
+        columns = list(zip(*states))
+        positions = np.array(columns[0])
+        velocities = np.array(columns[1])
+        efforts = self._efforts.copy() if self._torque_mode else np.array(columns[3])
         return positions, velocities, efforts
 
     def world_pose(self) -> tuple[float, float, float]:
@@ -162,10 +166,10 @@ class SimRobot:
 
     def tilt(self) -> float:
         """Angle [rad] between base_link's z axis and the vertical (tip-over check)."""
-        _, orientation = pb.getBasePositionAndOrientation(self.body,
-                                                          physicsClientId=self.world.client)
-        matrix = pb.getMatrixFromQuaternion(orientation)
-        return math.acos(max(-1.0, min(1.0, matrix[8])))
+        _, (qx, qy, _, _) = pb.getBasePositionAndOrientation(self.body,
+                                                             physicsClientId=self.world.client)
+        # z-z entry of the rotation matrix of a unit quaternion
+        return math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (qx * qx + qy * qy))))
 
 
 class SimWorld:

@@ -168,6 +168,11 @@ class PoweredCasterKinematics(BaseKinematics):
         self.r = np.array([c.wheel_radius for c in casters])
         self.b = np.array([c.caster_offset for c in casters])
         self._ones = np.ones(len(casters))
+        # The control cycle's paths (inverse, the slip_min fit) run on Python
+        # floats: for n <= 8 casters a loop of scalar math costs a third of
+        # the same work as a dozen numpy calls on length-n arrays.
+        self._geometry = tuple((float(c.axis[0]), float(c.axis[1]), float(c.caster_offset),
+                                float(c.wheel_radius)) for c in casters)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -248,15 +253,18 @@ class PoweredCasterKinematics(BaseKinematics):
         swerve module): phi_dot = n . v(s) / b - wz, rho_dot = e . v(s) / r,
         with v(s) the base's velocity at the steering axis.
         """
-        phi = positions[0::2]
-        c, s = np.cos(phi), np.sin(phi)
+        q = positions.tolist() if isinstance(positions, np.ndarray) else list(positions)
         vx, vy, wz = float(twist[0]), float(twist[1]), float(twist[2])
-        vsx = vx - wz * self.sy
-        vsy = vy + wz * self.sx
-        out = np.empty(2 * len(self.casters))
-        out[0::2] = (c * vsy - s * vsx) / self.b - wz
-        out[1::2] = (c * vsx + s * vsy) / self.r
-        return out
+        out = []
+        cos, sin = math.cos, math.sin
+        for i, (sx, sy, b, r) in enumerate(self._geometry):
+            phi = q[2 * i]
+            c, s = cos(phi), sin(phi)
+            vsx = vx - wz * sy
+            vsy = vy + wz * sx
+            out.append((c * vsy - s * vsx) / b - wz)
+            out.append((c * vsx + s * vsy) / r)
+        return np.array(out)
 
     def _contact_velocities(self, positions, velocities):
         """Contact points and the sensed contact velocities C_q^-1 q_dot (per caster)."""
@@ -287,11 +295,42 @@ class PoweredCasterKinematics(BaseKinematics):
         return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
                               estimator)
 
+    def _slip_min(self, positions, velocities):
+        """The slip_min fit and its residual in scalar math: ``_rigid_fit``
+        with unit weights, written out per caster (same closed form)."""
+        q, v = positions.tolist(), velocities.tolist()
+        cos, sin = math.cos, math.sin
+        pts = []
+        sum_x = sum_y = sum_u = sum_w = 0.0
+        for i, (sx, sy, b, r) in enumerate(self._geometry):
+            phi = q[2 * i]
+            c, s = cos(phi), sin(phi)
+            dphi, drho = v[2 * i], v[2 * i + 1]
+            x, y = sx - b * c, sy - b * s
+            u = -b * s * dphi + r * c * drho
+            w = b * c * dphi + r * s * drho
+            pts.append((x, y, u, w))
+            sum_x += x
+            sum_y += y
+            sum_u += u
+            sum_w += w
+        n = len(pts)
+        cx, cy, mu, mw = sum_x / n, sum_y / n, sum_u / n, sum_w / n
+        num = den = 0.0
+        for x, y, u, w in pts:
+            qx, qy = x - cx, y - cy
+            num += qx * w - qy * u
+            den += qx * qx + qy * qy
+        wz = num / den if den > 1e-12 * n else 0.0
+        tx, ty = mu + wz * cy, mw - wz * cx
+        residual = [math.hypot(u - (tx - wz * y), w - (ty + wz * x)) for x, y, u, w in pts]
+        return np.array((tx, ty, wz)), np.array(residual)
+
     def _estimate(self, positions, velocities, estimator):
-        px, py, vx, vy = self._contact_velocities(positions, velocities)
         if estimator == "slip_min":
-            twist = _rigid_fit(px, py, vx, vy, self._ones)
-        elif estimator == "pinv":
+            return self._slip_min(positions, velocities)
+        px, py, vx, vy = self._contact_velocities(positions, velocities)
+        if estimator == "pinv":
             C = self.constraint_matrix(positions)
             twist = np.linalg.lstsq(C, velocities, rcond=None)[0]
         elif estimator == "robust":

@@ -1,0 +1,289 @@
+"""Benchmarks with ROS in the loop: the control loop at 1 kHz under traffic,
+and the command latency against DDS's own, measured in the same run.
+
+Both start real processes; every ROS process runs with
+ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and the benchmark's ROS_DOMAIN_ID
+(bench/run.py sets them).
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+
+def _spin(nodes):
+    """A SingleThreadedExecutor for ``nodes`` in a daemon thread; returns stop()."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    executor = SingleThreadedExecutor()
+    for node in nodes:
+        executor.add_node(node)
+    stop = threading.Event()
+
+    def run():
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.05)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+
+    def finish():
+        stop.set()
+        thread.join(2.0)
+        executor.shutdown()
+    return finish
+
+
+def _start_bringup(args: list[str], name: str):
+    """A ``holonomic-bringup`` process (its own session) logging to a file."""
+    log = open(os.environ.get("BENCH_LOG_DIR", "/tmp") + f"/bench_{name}_bringup.log", "w")
+    proc = subprocess.Popen([shutil.which("holonomic-bringup"), *args], stdout=log,
+                            stderr=subprocess.STDOUT, start_new_session=True)
+    return proc, log
+
+
+def _stop_bringup(proc, log) -> None:
+    """SIGINT (the normal shutdown), killed only if it hangs."""
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(15)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    log.close()
+
+
+def loop_at_1khz(seconds: float = 60.0, robot: str = "hamr") -> dict:
+    """``holonomic-bringup ROBOT --driver mock`` at 1 kHz for ``seconds``
+    with cmd_vel at 100 Hz in and odom at 50 Hz out; the loop's own period
+    statistics, read from its diagnostics once a second (each covers the
+    last 2000 cycles), and the overruns during the measurement."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import Twist
+    from nav_msgs.msg import Odometry
+
+    ns = "bench_loop"
+    proc, log = _start_bringup([robot, "--driver", "mock", "--enable", "--namespace", ns,
+                                "-p", "control_rate:=1000.0", "-p", "publish_rate:=50.0"], "loop")
+    node = rclpy.create_node("bench_loop_client")
+    windows, odom_count = [], [0]
+    latest = {}
+
+    def on_diag(msg):
+        for status in msg.status:
+            if status.name.endswith("control loop"):
+                values = {kv.key: kv.value for kv in status.values}
+                latest.update(values)
+                windows.append(values)
+
+    node.create_subscription(DiagnosticArray, f"/{ns}/diagnostics", on_diag, 10)
+    node.create_subscription(Odometry, f"/{ns}/odom",
+                             lambda m: odom_count.__setitem__(0, odom_count[0] + 1), 100)
+    pub = node.create_publisher(Twist, f"/{ns}/cmd_vel", 10)
+    finish = _spin([node])
+    try:
+        deadline = time.monotonic() + 30.0
+        while not windows and time.monotonic() < deadline:
+            time.sleep(0.1)
+        if not windows:
+            raise RuntimeError("the robot did not publish diagnostics within 30 s")
+        windows.clear()
+        overruns_before = int(latest["overruns"])
+        odom_count[0] = 0
+        msg = Twist()
+        t0 = time.monotonic()
+        k = 0
+        while time.monotonic() - t0 < seconds:
+            msg.linear.x = 0.3 * np.sin(0.5 * k / 100.0)
+            msg.linear.y = 0.2
+            msg.angular.z = 0.5
+            pub.publish(msg)
+            k += 1
+            time.sleep(max(0.0, t0 + k / 100.0 - time.monotonic()))
+        elapsed = time.monotonic() - t0
+        time.sleep(1.2)              # one more diagnostics message
+    finally:
+        finish()
+        node.destroy_node()
+        _stop_bringup(proc, log)
+    p99 = [float(w["period_p99_ms"]) for w in windows]
+    p50 = [float(w["period_p50_ms"]) for w in windows]
+    return {"robot": robot, "seconds": seconds, "windows": len(windows),
+            "rate_hz": float(np.median([float(w["rate_hz"]) for w in windows])),
+            "period_p50_ms": float(np.median(p50)),
+            "period_p99_ms_worst_window": max(p99),
+            "period_p99_ms_median_window": float(np.median(p99)),
+            # the worst period inside the measurement (each window's own max;
+            # the windows overlap and cover it); the start-up is not measured
+            "period_max_ms": max(float(w["period_window_max_ms"]) for w in windows),
+            "period_max_since_start_ms": float(latest["period_max_ms"]),
+            "overruns": int(latest["overruns"]) - overruns_before,
+            "odom_hz": odom_count[0] / elapsed,
+            "cmd_hz": k / elapsed}
+
+
+PUBLISHER = """
+import sys, time, os
+import rclpy
+from geometry_msgs.msg import TwistStamped
+count, rate, topic = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+rclpy.init()
+node = rclpy.create_node("bench_latency_publisher")
+pub = node.create_publisher(TwistStamped, topic, 10)
+deadline = time.monotonic() + 30.0
+while pub.get_subscription_count() < 2 and time.monotonic() < deadline:
+    time.sleep(0.05)
+time.sleep(1.0)
+msg = TwistStamped()
+t0 = time.monotonic()
+for k in range(count):
+    msg.twist.linear.x = (k + 1) * 1e-5
+    msg.header.stamp = node.get_clock().now().to_msg()
+    pub.publish(msg)
+    time.sleep(max(0.0, t0 + (k + 1) / rate - time.monotonic()))
+time.sleep(0.5)
+rclpy.shutdown()
+"""
+
+
+def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr") -> dict:
+    """TwistStamped from another process -> joint command written to the
+    driver (a 1 kHz base controller node, mock driver, in this process),
+    against the DDS one-way latency of the same messages to a plain
+    subscriber in this process. Percentiles in ms."""
+    import rclpy
+    from geometry_msgs.msg import TwistStamped
+    from rclpy.parameter import Parameter
+
+    from holonomic_bringup.base_controller_node import BaseControllerNode
+
+    ns = "bench_latency"
+    params = [Parameter("robot_config", value=robot), Parameter("driver", value="mock"),
+              Parameter("control_rate", value=1000.0), Parameter("cmd_vel_stamped", value=True),
+              Parameter("enable_on_start", value=True), Parameter("cmd_timeout", value=0.0)]
+    for axis in ("linear.x", "linear.y", "angular.z"):
+        # the limiter passes each command through in one cycle: the latency
+        # measured is transport + waiting for the next cycle, not a ramp
+        params += [Parameter(f"limits.{axis}.max_acceleration", value=1000.0),
+                   Parameter(f"limits.{axis}.max_deceleration", value=1000.0)]
+    node = BaseControllerNode(namespace=ns, parameter_overrides=params)
+    # as base_controller_node.main() sets up its process
+    sys.setswitchinterval(min(5e-4, 0.2 * node.loop.period))
+    gc.freeze()
+    ctrl = node.controller
+    used = {"vx": None}
+    written: dict[float, float] = {}
+    arrived: dict[float, float] = {}
+    stamps: dict[float, float] = {}
+
+    # Instrumentation: which command a cycle used, and when its joint rates
+    # reached the driver.
+    original_target, original_write = ctrl._target, ctrl.driver.write_velocities
+
+    def target():
+        twist = original_target()
+        used["vx"] = round(float(twist[0]), 9)
+        return twist
+
+    def write(rates):
+        original_write(rates)
+        vx = used["vx"]
+        if vx and vx not in written:
+            written[vx] = time.time()
+
+    received: dict[float, float] = {}
+    original_set = ctrl.set_command
+
+    def set_command(twist, when=None):
+        received.setdefault(round(float(twist[0]), 9), time.time())
+        return original_set(twist, when)
+
+    ctrl._target = target
+    ctrl.driver.write_velocities = write
+    ctrl.set_command = set_command
+    plain = rclpy.create_node("bench_latency_plain")
+
+    def on_plain(msg):
+        now = time.time()
+        vx = round(msg.twist.linear.x, 9)
+        arrived[vx] = now
+        stamps[vx] = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+    plain.create_subscription(TwistStamped, f"/{ns}/cmd_vel", on_plain, 10)
+    finish = _spin([node, plain])
+    try:
+        subprocess.run([sys.executable, "-c", PUBLISHER, str(count), str(rate),
+                        f"/{ns}/cmd_vel"], check=True, timeout=count / rate + 60)
+        time.sleep(0.2)
+    finally:
+        finish()
+        node.shutdown()
+        node.destroy_node()
+        plain.destroy_node()
+    both = [vx for vx in stamps if vx in written and vx in received]
+    dds = np.array([arrived[vx] - stamps[vx] for vx in both]) * 1e3
+    node_rx = np.array([received[vx] - stamps[vx] for vx in both]) * 1e3
+    e2e = np.array([written[vx] - stamps[vx] for vx in both]) * 1e3
+    return {"robot": robot, "commands": count, "matched": len(both),
+            "dds_p50_ms": float(np.percentile(dds, 50)), "dds_p99_ms": float(np.percentile(dds, 99)),
+            "node_rx_p50_ms": float(np.percentile(node_rx, 50)),
+            "e2e_p50_ms": float(np.percentile(e2e, 50)), "e2e_p99_ms": float(np.percentile(e2e, 99)),
+            "ratio_p50": float(np.percentile(e2e, 50) / np.percentile(dds, 50))}
+
+
+def memory_growth(seconds: float = 240.0, robot: str = "hamr") -> dict:
+    """RSS [MB] of a simulated ``holonomic-bringup`` driven the whole time
+    (cmd_vel at 20 Hz, turning so it stays in place), sampled every 10 s;
+    growth after the first minute."""
+    import rclpy
+    from geometry_msgs.msg import Twist
+
+    ns = "bench_memory"
+    proc, log = _start_bringup([robot, "--enable", "--namespace", ns], "memory")
+    node = rclpy.create_node("bench_memory_client")
+    pub = node.create_publisher(Twist, f"/{ns}/cmd_vel", 10)
+    samples = []
+
+    def rss_mb() -> float:
+        # the wrapper execs python: the PID is the program's
+        for line in Path(f"/proc/{proc.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+        raise RuntimeError("no VmRSS")
+
+    try:
+        time.sleep(5.0)
+        t0 = time.monotonic()
+        msg = Twist()
+        next_sample = 0.0
+        while time.monotonic() - t0 < seconds:
+            t = time.monotonic() - t0
+            msg.linear.x = 0.4 * np.cos(0.4 * t)
+            msg.linear.y = 0.4 * np.sin(0.4 * t)
+            msg.angular.z = 0.3
+            pub.publish(msg)
+            if t >= next_sample:
+                samples.append((t, rss_mb()))
+                next_sample += 10.0
+            time.sleep(0.05)
+        samples.append((time.monotonic() - t0, rss_mb()))
+    finally:
+        node.destroy_node()
+        _stop_bringup(proc, log)
+    after_minute = [mb for t, mb in samples if t >= 60.0]
+    return {"robot": robot, "seconds": seconds, "rss_start_mb": samples[0][1],
+            "rss_at_1min_mb": after_minute[0], "rss_end_mb": samples[-1][1],
+            "growth_after_1min_mb": samples[-1][1] - after_minute[0],
+            "max_growth_after_1min_mb": max(after_minute) - after_minute[0]}

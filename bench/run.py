@@ -1,0 +1,229 @@
+"""``make bench``: the benchmark suite. Prints a table of every target and
+writes it, with the machine it ran on, to docs/benchmarks.md.
+
+Not part of the test suite's pass/fail: timings on shared machines are
+noisy, so every target is a ratio measured in the same run or a percentile
+over many samples, and the page records what one run measured.
+
+Usage: python bench/run.py [--quick] [--out docs/benchmarks.md]
+(--quick: shorter runs, for trying changes; the page says so.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+import compute  # noqa: E402  (bench/ is not a package)
+import ros_loop  # noqa: E402
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem = ""
+    try:
+        kb = int(Path("/proc/meminfo").read_text().split()[1])
+        mem = f", {kb / 1024 / 1024:.0f} GiB RAM"
+    except (OSError, ValueError, IndexError):
+        pass
+    import numpy
+    from importlib.metadata import version
+    return (f"{cpu}, {os.cpu_count()} cores{mem}; {platform.system()} {platform.release()}; "
+            f"Python {platform.python_version()}, numpy {numpy.__version__}, "
+            f"pybullet {version('pybullet')}, rclpy (ROS 2 Jazzy wheels)")
+
+
+def verdict(ok: bool) -> str:
+    return "met" if ok else "**not met**"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="bench/run.py", description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="shorter runs (not for the docs)")
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
+    parser.add_argument("--render", type=Path, metavar="JSON",
+                        help="only rewrite the page from a previous run's results")
+    args = parser.parse_args(argv)
+    if args.render:
+        saved = json.loads(args.render.read_text())
+        table = format_table(saved["results"])
+        print(table)
+        write_page(args.out, table, saved, saved["elapsed"], saved["quick"])
+        return 0
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "97")
+    quick = args.quick
+    started = time.monotonic()
+    results: dict = {}
+
+    def step(name, fn, *a, **kw):
+        t0 = time.monotonic()
+        print(f"bench: {name} ...", file=sys.stderr, flush=True)
+        value = fn(*a, **kw)
+        print(f"bench: {name}: {json.dumps(value)} ({time.monotonic() - t0:.0f} s)",
+              file=sys.stderr, flush=True)
+        return value
+
+    cycles = 20_000 if quick else 100_000
+    results["compute"] = [step(f"cycle compute {r}", compute.cycle_compute, r, cycles)
+                          for r in ("hamr", "xr4000")]
+    results["sim"] = [step(f"simulation speed {r}", compute.simulation_speed, r,
+                           5.0 if quick else 20.0) for r in ("hamr", "xr4000")]
+    results["fleet"] = step("fleet", compute.fleet_speed, "hamr",
+                            (1, 4, 8) if quick else (1, 2, 4, 8, 16, 24, 32, 40, 48),
+                            2.0 if quick else 3.0)
+    import rclpy
+    rclpy.init()
+    try:
+        results["loop"] = step("1 kHz loop", ros_loop.loop_at_1khz, 15.0 if quick else 60.0)
+        results["latency"] = step("command latency", ros_loop.command_latency,
+                                  1000 if quick else 5000)
+        results["memory"] = step("memory", ros_loop.memory_growth, 75.0 if quick else 240.0)
+    finally:
+        rclpy.try_shutdown()
+    elapsed = time.monotonic() - started
+    table = format_table(results)
+    print(table)
+    saved = {"results": results, "elapsed": elapsed, "quick": quick, "machine": machine(),
+             "when": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
+    args.out.with_suffix(".json").write_text(json.dumps(saved, indent=1))
+    write_page(args.out, table, saved, elapsed, quick)
+    print(f"bench: wrote {args.out} ({elapsed / 60:.1f} min)", file=sys.stderr)
+    return 0
+
+
+def format_table(r: dict) -> str:
+    rows = ["| what | measured | target | |", "|---|---|---|---|"]
+    for c in r["compute"]:
+        rows.append(
+            f"| control-cycle compute, {c['robot']} ({c['joints']} joints) | "
+            f"{c['compute_us']:.1f} µs vs baseline {c['baseline_us']:.1f} µs: "
+            f"**{c['speedup']:.1f}×**; full cycle with driver I/O and checks "
+            f"{c['full_cycle_us']:.1f} µs (median of {c['cycles']} each) | ≥ 5× faster"
+            + (", ≤ 30 µs" if c["joints"] > 3 else "") + " | "
+            + verdict(c["speedup"] >= 5.0 and (c["joints"] <= 3 or c["compute_us"] <= 30.0))
+            + (f" (≤ 30 µs met)" if c["joints"] > 3 and c["compute_us"] <= 30.0
+               and c["speedup"] < 5.0 else "") + " |")
+    lp = r["loop"]
+    rows.append(
+        f"| 1 kHz loop, mock driver, cmd_vel {lp['cmd_hz']:.0f} Hz in, odom "
+        f"{lp['odom_hz']:.0f} Hz out, {lp['seconds']:.0f} s | {lp['rate_hz']:.1f} Hz; period "
+        f"p50 {lp['period_p50_ms']:.3f} ms, p99 {lp['period_p99_ms_median_window']:.3f} ms "
+        f"(median of {lp['windows']} 2-s windows; worst window {lp['period_p99_ms_worst_window']:.3f} ms), "
+        f"max {lp['period_max_ms']:.2f} ms, {lp['overruns']} overruns (cycles more than a "
+        f"period late) | p99 ≤ 1.1 ms, none "
+        f"later than 5 ms | {verdict(lp['period_p99_ms_worst_window'] <= 1.1)} (p99), "
+        f"{verdict(lp['period_max_ms'] <= 5.0)} (max) |")
+    la = r["latency"]
+    rows.append(
+        f"| command latency, TwistStamped from another process → joint command written, "
+        f"{la['matched']} commands | p50 {la['e2e_p50_ms']:.3f} ms, p99 {la['e2e_p99_ms']:.3f} ms "
+        f"(in the node's callback: p50 {la['node_rx_p50_ms']:.3f} ms); "
+        f"DDS one-way p50 {la['dds_p50_ms']:.3f} ms, p99 {la['dds_p99_ms']:.3f} ms: "
+        f"**{la['ratio_p50']:.2f}×** | p50 ≤ 2× DDS | {verdict(la['ratio_p50'] <= 2.0)} |")
+    for s in r["sim"]:
+        rows.append(
+            f"| simulation speed, {s['robot']}, controller in the loop, 1 kHz physics | "
+            f"{s['with_controller_x']:.1f}× real time vs raw pybullet "
+            f"{s['raw_pybullet_x']:.1f}×: **{100 * s['ratio']:.0f} %** | ≥ 80 % | "
+            f"{verdict(s['ratio'] >= 0.8)} |")
+    f = r["fleet"]
+    factors = ", ".join(f"{n}: {x:.1f}×" for n, x in f["realtime_factor"].items())
+    rows.append(f"| fleet, {f['robot']}, one world, a controller each | real-time factor by N: "
+                f"{factors}; **largest N at ≥ 1×: {f['largest_n_realtime']}** | report | — |")
+    m = r["memory"]
+    rows.append(
+        f"| memory, simulated bringup driven {m['seconds']:.0f} s | RSS {m['rss_start_mb']:.1f} → "
+        f"{m['rss_at_1min_mb']:.1f} MB at 1 min → {m['rss_end_mb']:.1f} MB: "
+        f"**{m['growth_after_1min_mb']:+.1f} MB** after the first minute | ≤ 5 MB | "
+        f"{verdict(m['max_growth_after_1min_mb'] <= 5.0)} |")
+    return "\n".join(rows)
+
+
+def write_page(path: Path, table: str, saved: dict, elapsed: float, quick: bool) -> None:
+    odometry = (ROOT / "docs" / "odometry_experiment.md").read_text()
+    start = odometry.index("## Results")
+    block = odometry[start:odometry.index("## What it shows")].strip()
+    text = f"""# Benchmarks
+
+`make bench` (about {elapsed / 60:.0f} minutes) runs `bench/run.py`, prints this table and
+rewrites this page (and `docs/benchmarks.json`, the raw results). It is not part of `make test`:
+timings on a shared machine are noisy, so every target is a ratio measured within one run (ours
+against a baseline or the raw library, in alternating blocks) or a percentile over many samples.
+
+Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['machine']}.
+
+{table}
+
+## The targets not met, and what it would take
+
+- **Compute ≥ 5× the baseline.** The per-cycle math runs on Python floats with no matrix
+  inversion (the closed-form slip_min fit, the scalar covariance update, the limits on three
+  floats); what is left is interpreter overhead -- about 1 µs per Python-level operation on
+  this CPU -- and the baseline is itself numpy calls of a few µs each, so the ratio stays near
+  2.5-3.5× (the ≤ 30 µs for four casters is met with room). A 5× margin needs the cycle out of
+  the interpreter: the same closed forms in a small C extension or numba (not tried here).
+- **1 kHz loop: p99 ≤ 1.1 ms and nothing later than 5 ms.** The loop thread sleeps to absolute
+  deadlines and busy-waits the last 0.2 ms, but it shares the GIL with the executor thread
+  (callbacks, publishing) and two cores with the DDS threads and the traffic generator: about
+  one cycle in a hundred starts 0.3-0.8 ms late, and every few seconds one is delayed by several
+  milliseconds (not the garbage collector: the node freezes its start-up objects and a full
+  collection then takes 0.05 ms). At 200 Hz, the product's default rate, the same jitter is a
+  small fraction of the period. Holding 1 kHz hard needs the loop outside the GIL -- a real-time
+  thread (SCHED_FIFO, which needs CAP_SYS_NICE) in a compiled process (ros2_control's
+  controller_manager is the usual answer) -- not more Python tuning.
+"""
+    text += f"""
+
+## How each row is measured
+
+- **Control-cycle compute**: the work a control cycle does besides I/O -- twist limits, exact
+  inverse kinematics, joint-rate saturation, odometry (the slip_min fit, the SE(2) arc, the
+  covariance) -- with the classes the controller uses, against the same work written the
+  straightforward way (`bench/compute.py: BaselineCycle`: C rebuilt and `numpy.linalg.pinv(C)`
+  every cycle, fresh arrays, numpy clipping), 5000-cycle blocks alternating, medians. "Full
+  cycle" is `BaseController.step` with the mock driver: also driver read and write, the
+  plausibility checks of every reading, the command timeout.
+- **1 kHz loop**: `holonomic-bringup hamr --driver mock -p control_rate:=1000.0` as its own
+  process; this process publishes `cmd_vel` at 100 Hz and subscribes `odom`. The loop's period
+  statistics come from its own diagnostics (1 Hz, each over the last 2000 cycles, overlapping
+  and covering the measurement); start-up is not measured.
+- **Command latency**: a base controller node (1 kHz, mock driver, `cmd_vel_stamped`,
+  acceleration limits out of the way) in this process, instrumented to timestamp the write of
+  the first joint command computed from each `TwistStamped`; the publisher is another process
+  stamping each message with the system clock; a plain subscriber in this process gives DDS's
+  one-way latency for the same messages.
+- **Simulation speed**: `BaseController` + `sim` driver stepped as fast as possible (1 kHz
+  physics, 200 Hz control, a constant twist), against `pybullet.stepSimulation` of the same
+  generated robot in the same world, same run.
+- **Fleet**: N robots in one world, a `BaseController` each, one loop (the `--fleet` runner's
+  cycle), no ROS.
+- **Memory**: `holonomic-bringup hamr --enable` (simulator) driven by `cmd_vel` at 20 Hz for the
+  whole run; RSS from `/proc` every 10 s.
+
+## Odometry accuracy (XR4000, from docs/odometry_experiment.md)
+
+{block}
+"""
+    path.write_text(text)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
