@@ -19,6 +19,7 @@ setup(
     entry_points={
         "console_scripts": [
             "holonomic-odometry-experiment = holonomic_sim.odometry_experiment:main",
+            "holonomic-torque-experiment = holonomic_sim.torque_experiment:main",
         ],
     },
 )

@@ -37,8 +37,9 @@ from holonomic_core.limits import TwistLimiter, is_finite_twist, saturate_joint_
 from holonomic_core.model import (RobotModel, build_model, check_no_unknown, read_params_file,
                                   resolve_config)
 from holonomic_core.monitor import MonitorLimits, ReadingMonitor
-from holonomic_core.odometry import Odometry, OdometryNoise
+from holonomic_core.odometry import Odometry, OdometryNoise, wrap_angle
 from holonomic_core.schema import ConfigError, ParamSpec, validate
+from holonomic_core.torque import OperationalSpaceController, dynamics_for
 
 _AXES = (("linear.x", "m/s", "m/s^2"), ("linear.y", "m/s", "m/s^2"),
          ("angular.z", "rad/s", "rad/s^2"))
@@ -74,6 +75,17 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "Age [s] after which the last cmd_vel is stale and the base stops "
               "under the deceleration limits; 0 disables the timeout.",
               default=0.5, minimum=0.0, maximum=60.0),
+    ParamSpec("control_mode", "string",
+              "velocity: joint velocity commands from the exact inverse kinematics (every "
+              "robot); torque: dynamically decoupled operational-space control, F = Lambda F* "
+              "+ mu, joint torques C#^T F (Holmberg & Khatib; PCV on a driver with torque "
+              "mode).", default="velocity", choices=("velocity", "torque")),
+    ParamSpec("torque.kp", "double_array",
+              "Torque mode: position gains of the unit-mass system for (x, y, yaw) [1/s^2].",
+              default=(36.0, 36.0, 36.0), minimum=0.0, maximum=1e4, min_length=3),
+    ParamSpec("torque.kv", "double_array",
+              "Torque mode: velocity gains for (x, y, yaw) [1/s] (2 sqrt(kp): critically "
+              "damped).", default=(12.0, 12.0, 12.0), minimum=0.0, maximum=1e3, min_length=3),
     ParamSpec("estimator", "string",
               "Odometry estimator: slip_min (C# = Cp+ Cq^-1), pinv or robust.",
               default="slip_min", choices=ESTIMATORS),
@@ -133,6 +145,9 @@ class ControllerConfig:
     publish_tf: bool
     cmd_vel_stamped: bool
     enable_on_start: bool
+    control_mode: str
+    torque_kp: tuple[float, float, float]
+    torque_kv: tuple[float, float, float]
     max_velocity: tuple[float, float, float]
     max_acceleration: tuple[float, float, float]
     max_deceleration: tuple[float, float, float]
@@ -147,13 +162,17 @@ class ControllerConfig:
         if len(v["odometry.twist_variance"]) != 3:
             raise ConfigError("odometry.twist_variance", v["odometry.twist_variance"],
                               "exactly 3 variances (vx, vy, wz)")
+        for key in ("torque.kp", "torque.kv"):
+            if len(v[key]) != 3:
+                raise ConfigError(key, v[key], "exactly 3 gains (x, y, yaw)")
         axes = [a for a, _, _ in _AXES]
         return cls(
             driver=v["driver"], control_rate=v["control_rate"], publish_rate=v["publish_rate"],
             cmd_timeout=v["cmd_timeout"], estimator=v["estimator"],
             odom_frame=v["odom_frame"], base_frame=v["base_frame"],
             publish_tf=v["publish_tf"], cmd_vel_stamped=v["cmd_vel_stamped"],
-            enable_on_start=v["enable_on_start"],
+            enable_on_start=v["enable_on_start"], control_mode=v["control_mode"],
+            torque_kp=tuple(v["torque.kp"]), torque_kv=tuple(v["torque.kv"]),
             max_velocity=tuple(v[f"limits.{a}.max_velocity"] for a in axes),
             max_acceleration=tuple(v[f"limits.{a}.max_acceleration"] for a in axes),
             max_deceleration=tuple(v[f"limits.{a}.max_deceleration"] for a in axes),
@@ -189,6 +208,12 @@ def config_from_flat(flat: Mapping[str, Any], source: str = "") -> RobotConfig:
     values.update(validate(CONTROLLER_SPECS, flat))
     controller = ControllerConfig.from_values(values)
     dcls = driver_class(controller.driver)
+    if controller.control_mode == "torque":
+        if not dcls.supports_effort:
+            raise ConfigError("control_mode", "torque",
+                              f"'velocity' with driver '{controller.driver}' (it has no torque "
+                              "mode; the sim driver has)")
+        dynamics_for(model)      # a family without a dynamic model says so here
     dspecs = dcls.param_specs(model)
     values.update(validate(dspecs, flat))
     # Keys of the backends not in use (e.g. `sim.*` on a real robot) are
@@ -218,6 +243,8 @@ class ControllerState(enum.Enum):
 
 
 _ZERO3 = np.zeros(3)
+#: gain [1/s] of velocity mode's pull onto a followed trajectory's pose
+TRAJECTORY_GAIN = 4.0
 
 
 class BaseController:
@@ -242,9 +269,16 @@ class BaseController:
                                       self.dt, c.monitor)
         self._clock = clock
         self._max_rates = self.model.max_joint_velocity
+        #: the torque-mode law (None in velocity mode)
+        self.torque = (OperationalSpaceController(
+            self.model, c.torque_kp, c.torque_kv,
+            [j.max_effort for j in self.model.joint_limits])
+            if c.control_mode == "torque" else None)
         n = len(self.model.joint_names)
         # (twist, receive time); replaced atomically by set_command
         self._command: tuple[np.ndarray, float] | None = None
+        # (trajectory, start time) while following one (see follow)
+        self._trajectory: tuple[Callable, float | None] | None = None
         self._requests: list[tuple[str, Any, concurrent.futures.Future]] = []
         self._requests_lock = threading.Lock()
         # outputs of the last cycle, read by the ROS shell in the loop thread
@@ -343,12 +377,34 @@ class BaseController:
             self.saturation = 1.0
             return True
 
-        target = self._target()
+        sample = self._trajectory_sample()
+        if sample is None:
+            target = self._target()
+        else:
+            # velocity mode follows the sample by feed-forward twist plus a
+            # proportional pull onto the reference pose (in base_link)
+            pose = self.odometry.pose
+            c, s = math.cos(pose[2]), math.sin(pose[2])
+            dx, dy = sample[0][0] - pose[0], sample[0][1] - pose[1]
+            pull = TRAJECTORY_GAIN * np.array([c * dx + s * dy, -s * dx + c * dy,
+                                               wrap_angle(sample[0][2] - pose[2])])
+            target = np.asarray(sample[1], float) + pull
         twist = self.limiter.limit(target, self.twist_command, self.dt)
         rates = self.model.kinematics.inverse(reading.positions, twist)
         rates, scale = saturate_joint_rates(rates, self._max_rates)
         try:
-            self.driver.write_velocities(rates)
+            if self.torque is None:
+                self.driver.write_velocities(rates)
+            elif sample is None:
+                # the reference is the limited, saturated twist; the monitor
+                # checks the joints against its joint rates as in velocity mode
+                efforts = self.torque.step(reading.positions, self.odometry.pose,
+                                           self.odometry.twist, twist * scale, self.dt)
+                self.driver.write_efforts(efforts)
+            else:
+                efforts = self.torque.track(reading.positions, self.odometry.pose,
+                                            self.odometry.twist, *sample)
+                self.driver.write_efforts(efforts)
         except DriverError as exc:
             self._on_fault(exc)
             return False
@@ -357,6 +413,36 @@ class BaseController:
         self.joint_command = rates
         self.saturation = scale
         return True
+
+    def follow(self, trajectory: Callable[[float], tuple | None]) -> None:
+        """Follow a trajectory (a precise move) instead of ``cmd_vel``.
+
+        ``trajectory(t)`` for t [s] since the next cycle returns ``(pose,
+        twist, acceleration)`` -- the reference pose in odom [m, m, rad], its
+        body twist and body-frame acceleration in base_link -- or None when it
+        is over (then the base is commanded to rest). Torque mode tracks it
+        with the decoupled PD law; velocity mode with feed-forward twist plus
+        a proportional pull (TRAJECTORY_GAIN) onto the pose. The limits and
+        checks stay in force. Any thread.
+        """
+        self._trajectory = (trajectory, None)
+
+    def _trajectory_sample(self):
+        active = self._trajectory
+        if active is None:
+            return None
+        trajectory, start = active
+        now = self._clock()
+        if start is None:
+            start = now
+            self._trajectory = (trajectory, start)
+        sample = trajectory(now - start)
+        if sample is None:
+            self._trajectory = None
+            self._command = (_ZERO3, now)
+            if self.torque is not None:
+                self.torque.reset(self.odometry.pose)
+        return sample
 
     def _target(self) -> np.ndarray:
         cmd = self._command
@@ -400,14 +486,18 @@ class BaseController:
         self.fault = None
         if self.driver.state is DriverState.INACTIVE:
             self.driver.activate()
-        # Start from rest and ignore commands sent before arming.
+        # Start from rest and ignore commands (and trajectories) sent before arming.
         self._command = None
+        self._trajectory = None
         self.twist_command = np.zeros(3)
+        if self.torque is not None:
+            self.torque.reset(self.odometry.pose)
         return True, "motors armed"
 
     def _disarm(self) -> tuple[bool, str]:
         self.driver.deactivate()
         self.twist_command = np.zeros(3)
+        self._trajectory = None
         return True, "motors disarmed"
 
     def _on_fault(self, exc: DriverError) -> None:
@@ -417,6 +507,7 @@ class BaseController:
         if self.fault is None:
             self.fault = str(exc)
         self.twist_command = np.zeros(3)
+        self._trajectory = None
         self.joint_command[:] = 0.0
         try:
             self.driver.deactivate()

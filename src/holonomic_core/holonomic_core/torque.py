@@ -1,0 +1,154 @@
+"""Dynamically decoupled torque control (Holmberg & Khatib, Sec. 4).
+
+``F = Lambda F* + mu`` (eq. 5) with the PD law on a reference trajectory
+``F* = -Kp (x - x_d) - Kv (x_dot - x_dot_d) + x_ddot_d`` (eq. 6), and the joint
+torques ``Gamma' = C#^T F`` (eq. 14): the dual of the slip-minimising
+estimator, which spreads the tractive effort over the wheels so that the
+contact forces are as even as possible. The velocity feedback ``x_dot`` is
+the slip-minimising odometry's twist, the position feedback its pose.
+
+The reference is the commanded twist after the controller's limits (so it
+never asks for more than the base may do), integrated on SE(2) into a
+reference pose: ``x_d``, ``x_dot_d`` and ``x_ddot_d`` (the change of the
+limited twist over the cycle). Errors are expressed in base_link. When the
+base cannot follow (held, pushed, saturated), the reference is pulled back to
+within ``max_error`` of the measured pose instead of running away; a base
+that stays far off its joint-rate reference trips the reading monitor's
+tracking check as in velocity mode. The reference restarts at the measured
+pose on every arming.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+
+import numpy as np
+
+from holonomic_core.odometry import compose_arc, wrap_angle
+from holonomic_core.schema import ConfigError
+
+#: kinematics kind -> "module:Class" of its dynamic model (lazily imported)
+DYNAMICS_REGISTRY = {"pcv": "pcv_base.dynamics:PcvDynamics"}
+
+#: largest position / heading error the reference may run ahead [m, rad]
+MAX_ERROR = (0.15, 0.15, 0.3)
+
+
+def dynamics_for(model):
+    """The dynamic model of ``model`` or ConfigError if its family has none."""
+    target = DYNAMICS_REGISTRY.get(model.kind)
+    if target is None:
+        raise ConfigError("control_mode", "torque",
+                          f"'velocity' for kinematics '{model.kind}' (torque mode needs a "
+                          f"dynamic model; families with one: {sorted(DYNAMICS_REGISTRY)})")
+    module, _, name = target.partition(":")
+    try:
+        return getattr(importlib.import_module(module), name).from_model(model)
+    except ValueError as exc:
+        raise ConfigError("control_mode", "torque", f"'velocity' for this robot ({exc})") from exc
+
+
+class OperationalSpaceController:
+    """Eqs. 5, 6 and 14 for one base; ``step`` once per control cycle.
+
+    ``kp`` [1/s^2] and ``kv`` [1/s]: per-axis gains of the unit-mass system;
+    ``max_efforts`` [N m]: joint torque limits (the torques are scaled
+    together to respect them, keeping the wrench's direction).
+    """
+
+    def __init__(self, model, kp, kv, max_efforts, dynamics=None, distribution: str = "slip_min"):
+        self.model = model
+        self.dynamics = dynamics if dynamics is not None else dynamics_for(model)
+        self.kp = np.asarray(kp, float)
+        self.kv = np.asarray(kv, float)
+        self.max_efforts = np.asarray(max_efforts, float)
+        if distribution not in ("slip_min", "pinv"):
+            raise ValueError(f"distribution must be 'slip_min' or 'pinv', got {distribution!r}")
+        #: C#^T (slip_min, the paper's) or pinv(C)^T (for comparison)
+        self.distribution = distribution
+        self.ref_pose = np.zeros(3)
+        self.ref_twist = np.zeros(3)
+        self.wrench = np.zeros(3)
+
+    def reset(self, pose) -> None:
+        """Restart the reference at rest at ``pose`` (odom) [m, m, rad]."""
+        self.ref_pose = np.array(pose, dtype=float)
+        self.ref_twist = np.zeros(3)
+
+    def errors(self, pose, twist) -> tuple[np.ndarray, np.ndarray]:
+        """(pose error, twist error) of the base against the reference, in
+        base_link [m, m, rad] and [m/s, m/s, rad/s]."""
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        dx, dy = pose[0] - self.ref_pose[0], pose[1] - self.ref_pose[1]
+        e_pose = np.array([c * dx + s * dy, -s * dx + c * dy,
+                           wrap_angle(pose[2] - self.ref_pose[2])])
+        # the reference twist, turned into the actual base frame
+        d = self.ref_pose[2] - pose[2]
+        cd, sd = math.cos(d), math.sin(d)
+        ref = np.array([cd * self.ref_twist[0] - sd * self.ref_twist[1],
+                        sd * self.ref_twist[0] + cd * self.ref_twist[1], self.ref_twist[2]])
+        return e_pose, np.asarray(twist, float) - ref
+
+    def step(self, positions, pose, twist, reference_twist, dt: float,
+             reference_acceleration=None) -> np.ndarray:
+        """Joint torques [N m] for this cycle.
+
+        ``positions``: joint positions; ``pose`` (odom) and ``twist`` (base
+        link): the odometry's estimate; ``reference_twist``: the limited
+        commanded body twist; ``reference_acceleration``: its body-frame
+        derivative if known (a trajectory), else taken from the twist's change.
+        """
+        ref_twist = np.asarray(reference_twist, float)
+        if reference_acceleration is None:
+            accel = (ref_twist - self.ref_twist) / dt
+        else:
+            accel = np.asarray(reference_acceleration, float)
+        # advance the reference pose by the reference twist over the cycle
+        mid = 0.5 * (ref_twist + self.ref_twist)
+        wx, wy = compose_arc(self.ref_pose, mid[0] * dt, mid[1] * dt, mid[2] * dt)
+        self.ref_pose = np.array([self.ref_pose[0] + wx, self.ref_pose[1] + wy,
+                                  wrap_angle(self.ref_pose[2] + mid[2] * dt)])
+        self.ref_twist = ref_twist
+        return self._torques(positions, pose, twist, accel)
+
+    def track(self, positions, pose, twist, ref_pose, ref_twist, ref_acceleration) -> np.ndarray:
+        """Joint torques [N m] to follow a trajectory sample: the reference
+        pose (odom), twist and body-frame acceleration given directly (a
+        precise move), instead of integrated from commands."""
+        self.ref_pose = np.array(ref_pose, dtype=float)
+        self.ref_twist = np.array(ref_twist, dtype=float)
+        return self._torques(positions, pose, twist, np.asarray(ref_acceleration, float))
+
+    def _torques(self, positions, pose, twist, accel) -> np.ndarray:
+        e_pose, e_twist = self.errors(pose, twist)
+        self._limit_reference(pose, e_pose)
+        e_pose = np.clip(e_pose, -np.array(MAX_ERROR), MAX_ERROR)
+        f_star = -self.kp * e_pose - self.kv * e_twist + accel
+        dyn = self.dynamics
+        self.wrench = dyn.mass_matrix(positions) @ f_star + dyn.bias(positions, twist)
+        return self.distribute(positions, self.wrench)
+
+    def distribute(self, positions, wrench) -> np.ndarray:
+        """Joint torques producing ``wrench`` (F = C^T Gamma'), scaled into
+        the torque limits."""
+        kin = self.model.kinematics
+        if self.distribution == "slip_min":
+            torques = kin.torque_distribution(positions, wrench)      # C#^T F
+        else:
+            torques = np.linalg.pinv(kin.constraint_matrix(positions)).T @ wrench
+        worst = float(np.max(np.abs(torques) / self.max_efforts))
+        if not math.isfinite(worst):
+            return np.zeros_like(torques)
+        return torques / worst if worst > 1.0 else torques
+
+    def _limit_reference(self, pose, e_pose) -> None:
+        """Pull the reference to within MAX_ERROR of the measured pose."""
+        if all(abs(e) <= m for e, m in zip(e_pose, MAX_ERROR)):
+            return
+        clipped = np.clip(e_pose, -np.array(MAX_ERROR), MAX_ERROR)
+        # ref = pose - R(theta) e (position), theta - e_theta (heading)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        self.ref_pose = np.array([pose[0] - (c * clipped[0] - s * clipped[1]),
+                                  pose[1] - (s * clipped[0] + c * clipped[1]),
+                                  wrap_angle(pose[2] - clipped[2])])

@@ -1,0 +1,169 @@
+"""Operational-space dynamics of a powered-caster vehicle (Holmberg & Khatib,
+Sec. 3): ``Lambda(q) x_ddot + mu(q, x_dot) = F``.
+
+``x_dot`` = (vx, vy, wz) is the body twist of base_link in base_link and
+``x_ddot`` its time derivative *in body components*; ``F`` = (fx, fy, tz)
+[N, N, N m] the wrench at base_link's origin in base_link, produced by the
+actuated joint torques as ``F = C^T Gamma'`` (eq. 9).
+
+Each caster is the paper's 3-DOF "manipulator" (steer phi, roll rho, twist
+sigma at the contact) whose joint rates follow the base twist through
+``q_dot_i = G_i x_dot`` (eq. 2). Rather than forming the joint-space mass
+matrix A_i of that chain and its coriolis vector b_i symbolically (the paper
+used AUTOLEV), we sum the same kinetic energy body by body, which is what
+``G_i^T A_i G_i`` and ``G_i^T (A_i G_i_dot x_dot + b_i)`` expand to for a chain
+whose bodies are the fork and the wheel:
+
+* every body's planar velocity (its centre of mass's velocity and its yaw
+  rate) and the wheel's spin are linear in the base twist, ``V_b = J_b(phi) x_dot``
+  (J_b is built from the rows of G_i: the steering rate moves the fork and
+  the wheel about the steering axis, the rolling rate spins the wheel);
+* ``Lambda = sum_b J_b^T M_b J_b`` (the augmented object: the chassis's own
+  ``diag(m, m, I)`` plus every caster's bodies, eq. 4);
+* ``mu = sum_b J_b^T M_b (J_b_dot x_dot + Omega(wz) J_b x_dot)``: the
+  derivative of the body velocities -- ``J_b_dot = dJ_b/dphi phi_dot`` with
+  ``phi_dot = C_steer x_dot`` (the paper's ``G_dot``; the partial derivative is
+  taken by a central difference, error ~1e-10) -- plus the rotation of the
+  base frame (``Omega(wz) v = wz k x v`` on the linear parts), since x_ddot
+  is a body-frame derivative.
+
+The gyroscopic moment of a spinning wheel turning about the vertical acts
+about a horizontal axis: the floor and the fork take it, and it does no work
+in the plane, so it is not in ``mu``. Masses and inertias are those of the
+simulator's URDF (``body.*``: chassis box, fork box with its centre half-way
+along the offset, wheel cylinder), so the model and pybullet describe the
+same robot.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class BodyParams:
+    """Masses [kg] and yaw / spin inertias [kg m^2] of the PCV's bodies."""
+
+    chassis_mass: float
+    chassis_inertia: float          # about the vertical through base_link's origin
+    fork_mass: float
+    fork_inertia: float             # about the vertical through the fork's centre
+    wheel_mass: float
+    wheel_inertia_yaw: float        # about a diameter (the vertical)
+    wheel_inertia_spin: float       # about the axle
+
+    @classmethod
+    def from_model(cls, model) -> "BodyParams":
+        """The inertias the simulator's URDF gives the same bodies
+        (holonomic_sim.urdf.pcv_urdf: solid box, box, cylinder)."""
+        p, k = model.params, model.kinematics
+        m_c, m_f, m_w = p["body.chassis.mass"], p["body.fork.mass"], p["body.wheel.mass"]
+        length, width = p["body.chassis.length"], p["body.chassis.width"]
+        w_w = p["body.wheel.width"]
+        # one radius and offset per robot for the bodies' sizes: the URDF
+        # uses each caster's own, so a robot with mixed casters is rejected
+        r, b = float(k.r[0]), float(k.b[0])
+        if np.ptp(k.r) > 1e-12 or np.ptp(k.b) > 1e-12:
+            raise ValueError("the dynamic model assumes identical casters (one wheel radius "
+                             "and one caster offset)")
+        arm = max(b, 0.01)
+        return cls(chassis_mass=m_c, chassis_inertia=m_c * (length ** 2 + width ** 2) / 12,
+                   fork_mass=m_f, fork_inertia=m_f * (arm ** 2 + 0.01 ** 2) / 12,
+                   wheel_mass=m_w, wheel_inertia_yaw=m_w * (3 * r ** 2 + w_w ** 2) / 12,
+                   wheel_inertia_spin=m_w * r ** 2 / 2)
+
+
+class PcvDynamics:
+    """Lambda(q) and mu(q, x_dot) of one PCV (``kin``: PoweredCasterKinematics)."""
+
+    def __init__(self, kin, body: BodyParams):
+        self.kin = kin
+        self.body = body
+        n = len(kin.casters)
+        # M_b per body row block: fork (m, m, I), wheel (m, m, I_yaw, I_spin)
+        self._fork_m = np.array([body.fork_mass, body.fork_mass, body.fork_inertia])
+        self._wheel_m = np.array([body.wheel_mass, body.wheel_mass, body.wheel_inertia_yaw,
+                                  body.wheel_inertia_spin])
+        self._chassis = np.diag([body.chassis_mass, body.chassis_mass, body.chassis_inertia])
+        self._n = n
+
+    @classmethod
+    def from_model(cls, model) -> "PcvDynamics":
+        return cls(model.kinematics, BodyParams.from_model(model))
+
+    # -- body Jacobians --------------------------------------------------------------
+    def _caster_jacobians(self, i: int, phi: float) -> tuple[np.ndarray, np.ndarray]:
+        """(J_fork 3x3, J_wheel 4x3): body velocities per unit base twist.
+
+        Rows: fork centre (vx, vy) and yaw rate; wheel centre (vx, vy), yaw
+        rate and spin rate rho_dot (all in base_link components).
+        """
+        cas = self.kin.casters[i]
+        sx, sy = cas.axis
+        b, r = cas.caster_offset, cas.wheel_radius
+        c, s = math.cos(phi), math.sin(phi)
+        # steering and rolling rows of the constraint matrix (eq. 7 / G rows 1-2)
+        steer = np.array([-s / b, c / b,
+                          cas.h * (math.cos(cas.beta) * c + math.sin(cas.beta) * s) / b - 1.0])
+        roll = np.array([c / r, s / r,
+                         cas.h * (math.cos(cas.beta) * s - math.sin(cas.beta) * c) / r])
+        n_vec = np.array([-s, c])
+
+        def point(px, py, arm):
+            # base velocity at (px, py) plus the fork's turn about the steering
+            # axis, which moves a point ``arm`` behind the axis by -arm phi_dot n
+            rows = np.array([[1.0, 0.0, -py], [0.0, 1.0, px]])
+            return rows - arm * np.outer(n_vec, steer)
+
+        yaw = np.array([0.0, 0.0, 1.0]) + steer          # wz + phi_dot
+        fork = np.vstack([point(sx - 0.5 * b * c, sy - 0.5 * b * s, 0.5 * b), yaw])
+        wheel = np.vstack([point(sx - b * c, sy - b * s, b), yaw, roll])
+        return fork, wheel
+
+    def _jacobians(self, steer: np.ndarray):
+        return [self._caster_jacobians(i, float(phi)) for i, phi in enumerate(steer)]
+
+    # -- the operational-space terms ----------------------------------------------------
+    def mass_matrix(self, positions) -> np.ndarray:
+        """Lambda (3 x 3) [kg, kg m, kg m^2] at the joint ``positions``."""
+        steer = np.asarray(positions, float)[0::2]
+        lam = self._chassis.copy()
+        for fork, wheel in self._jacobians(steer):
+            lam += fork.T @ (self._fork_m[:, None] * fork)
+            lam += wheel.T @ (self._wheel_m[:, None] * wheel)
+        return lam
+
+    def bias(self, positions, twist) -> np.ndarray:
+        """mu (3,) [N, N, N m]: centripetal and coriolis wrench at ``twist``."""
+        steer = np.asarray(positions, float)[0::2]
+        x_dot = np.asarray(twist, float)
+        wz = x_dot[2]
+        mu = np.zeros(3)
+        # the chassis: its centre is base_link's origin
+        mu += self._chassis @ np.array([-wz * x_dot[1], wz * x_dot[0], 0.0])
+        h = 1e-6
+        for i, phi in enumerate(steer):
+            fork, wheel = self._caster_jacobians(i, float(phi))
+            fork_p, wheel_p = self._caster_jacobians(i, float(phi) + h)
+            fork_m, wheel_m = self._caster_jacobians(i, float(phi) - h)
+            cas = self.kin.casters[i]
+            c, s = math.cos(phi), math.sin(phi)
+            phi_dot = ((-s * x_dot[0] + c * x_dot[1]) / cas.caster_offset
+                       + (cas.h * math.cos(cas.beta - phi) / cas.caster_offset - 1.0) * wz)
+            for J, Jp, Jm, masses in ((fork, fork_p, fork_m, self._fork_m),
+                                      (wheel, wheel_p, wheel_m, self._wheel_m)):
+                v = J @ x_dot
+                J_dot = (Jp - Jm) / (2 * h) * phi_dot
+                accel = J_dot @ x_dot
+                accel[0] -= wz * v[1]               # the base frame turns: wz k x v
+                accel[1] += wz * v[0]
+                mu += J.T @ (masses * accel)
+        return mu
+
+    def acceleration(self, positions, twist, wrench) -> np.ndarray:
+        """x_ddot (body components) produced by ``wrench`` F at ``twist``."""
+        return np.linalg.solve(self.mass_matrix(positions),
+                               np.asarray(wrench, float) - self.bias(positions, twist))
