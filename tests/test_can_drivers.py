@@ -251,3 +251,50 @@ def test_missing_node_id_is_refused_with_the_key(tmp_path):
     with pytest.raises(ConfigError) as err:
         load_config(str(path), {"driver": "odrive_can"})
     assert err.value.key == "odrive_can.joints.turret_joint.node_id"
+
+
+def test_odrive_torque_mode_switches_the_axes_and_sends_motor_torques(rig_factory):
+    """write_efforts: Set_Controller_Mode(TORQUE_CONTROL, PASSTHROUGH) once per
+    axis, then Set_Input_Torque = joint torque / gear ratio x direction; the
+    emulated motors accelerate with it; a velocity command switches back;
+    disarming zeroes both setpoints."""
+    from holonomic_drivers import odrive_protocol as proto
+    rig = rig_factory("odrive_can", "hamr")
+    assert rig.arm() == (True, "motors armed")
+    v = rig.config.values
+    joints = rig.model.joint_names
+    torques = np.array([0.2, -0.1, 0.05])
+    start = len(rig.sniff())
+    rig.controller.driver.write_efforts(torques)
+    rig.controller.driver.write_efforts(torques)
+    frames = rig.sniff()[start:]
+    for node, joint, tau in zip(rig.node_ids, joints, torques):
+        modes = [f for f in frames if f.arbitration_id == proto.frame_id(
+            node, proto.Cmd.SET_CONTROLLER_MODE)]
+        assert [struct.unpack("<II", bytes(f.data)) for f in modes] == [
+            (proto.ControlMode.TORQUE_CONTROL, proto.InputMode.PASSTHROUGH)]      # once
+        sent = [struct.unpack("<f", bytes(f.data))[0] for f in frames if f.arbitration_id
+                == proto.frame_id(node, proto.Cmd.SET_INPUT_TORQUE)]
+        expected = tau * v[f"odrive_can.joints.{joint}.direction"] / \
+            v[f"odrive_can.joints.{joint}.gear_ratio"]
+        assert sent == pytest.approx([expected, expected], rel=1e-6)
+    time.sleep(0.1)
+    speeds = [d.velocity_rev_per_s for d in rig.devices]
+    assert all(np.sign(s) == np.sign(t * v[f"odrive_can.joints.{j}.direction"])
+               for s, t, j in zip(speeds, torques, joints)), speeds
+    start = len(rig.sniff())
+    rig.controller.driver.write_velocities(np.zeros(3))
+    back = [struct.unpack("<II", bytes(f.data)) for f in rig.sniff()[start:]
+            if proto.split_id(f.arbitration_id)[1] == proto.Cmd.SET_CONTROLLER_MODE]
+    assert back == [(proto.ControlMode.VELOCITY_CONTROL, proto.InputMode.PASSTHROUGH)] * 3
+    rig.controller.driver.write_efforts(torques)
+    start = len(rig.sniff())
+    rig.controller.request_enable(False)
+    rig.step()
+    last = {}
+    for f in rig.sniff()[start:]:
+        last[f.arbitration_id] = bytes(f.data)
+    for node in rig.node_ids:
+        assert struct.unpack("<f", last[proto.frame_id(node, proto.Cmd.SET_INPUT_TORQUE)])[0] == 0.0
+        assert struct.unpack("<I", last[proto.frame_id(node, proto.Cmd.SET_AXIS_STATE)][:4])[0] \
+            == proto.AxisState.IDLE

@@ -112,6 +112,9 @@ class EmulatedOdriveAxis(EmulatedDevice):
         """Periods [s]; ``watchdog_timeout`` [s] > 0: no setpoint for that long
         in closed loop -> WATCHDOG_TIMER_EXPIRED (the ODrive's axis watchdog)."""
         super().__init__(channel, max_acceleration)
+        self._ramp = float(max_acceleration)
+        #: [kg m^2] of the free motor in torque mode
+        self.motor_inertia = 1e-4
         self.node_id = node_id
         self.heartbeat_period = heartbeat_period
         self.encoder_period = encoder_period
@@ -198,8 +201,19 @@ class EmulatedOdriveAxis(EmulatedDevice):
             return 0.0
         if self.control_mode == ControlMode.VELOCITY_CONTROL:
             return self.input_vel
-        # torque mode: an unloaded motor with 1 kg m^2... keep the speed
-        return self.velocity_rev_per_s
+        # torque mode: a free motor of inertia ``motor_inertia`` accelerates
+        # at torque / inertia (toward a far target, at that rate)
+        return math.copysign(1e9, self.input_torque) if self.input_torque else \
+            self.velocity_rev_per_s
+
+    def _advance(self, now: float) -> None:
+        if (self.control_mode == ControlMode.TORQUE_CONTROL
+                and self.axis_state == AxisState.CLOSED_LOOP_CONTROL):
+            # the ideal motor's acceleration is the torque's, not a ramp's
+            self.max_acceleration = abs(self.input_torque) / self.motor_inertia / (2 * math.pi)
+        else:
+            self.max_acceleration = self._ramp
+        super()._advance(now)
 
     def cyclic(self, now: float) -> None:
         if now >= self._next_heartbeat:

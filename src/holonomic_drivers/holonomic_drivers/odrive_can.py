@@ -58,9 +58,11 @@ class _Axis:
 class OdriveCanDriver(CanDriver):
     name = "odrive_can"
     device_kind = "ODrive"
-    # Torque mode (Set_Input_Torque) comes with the dynamic controller
-    # (issue 9), tested there; until then the backend refuses it.
-    supports_effort = False
+    # Torque mode: Set_Controller_Mode(TORQUE_CONTROL) on the first torque
+    # command, then Set_Input_Torque [N m at the motor]; a velocity command
+    # switches the axes back. The ODrive keeps its own vel_limit in torque
+    # mode (controller.config.enable_torque_mode_vel_limit).
+    supports_effort = True
 
     def __init__(self, model, params, control_rate: float):
         super().__init__(model, params, control_rate)
@@ -72,6 +74,8 @@ class OdriveCanDriver(CanDriver):
         self._input_mode = _INPUT_MODES[params[f"{PREFIX}.input_mode"]]
         self._poll = bool(params[f"{PREFIX}.poll_encoders"])
         self._bus = None
+        #: the control mode the axes were last told (per axis)
+        self._mode = [ControlMode.VELOCITY_CONTROL] * len(self._axes)
         self.counters = {"bad_frames": 0, "foreign_frames": 0, "error_frames": 0,
                          "frames_received": 0, "frames_sent": 0}
 
@@ -135,6 +139,7 @@ class OdriveCanDriver(CanDriver):
     def _on_activate(self) -> None:
         # only heartbeats sent after the request count
         seen = [a.heartbeats for a in self._axes]
+        self._mode = [ControlMode.VELOCITY_CONTROL] * len(self._axes)
         for node in self.joints.node_ids:
             self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors())
             self._send(node, Cmd.SET_CONTROLLER_MODE, proto.set_controller_mode(
@@ -206,10 +211,30 @@ class OdriveCanDriver(CanDriver):
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
         motor = self.joints.to_motor_velocities(np.asarray(velocities, float))
-        for node, value in zip(self.joints.node_ids, motor):
+        for i, (node, value) in enumerate(zip(self.joints.node_ids, motor)):
+            self._ensure_mode(i, ControlMode.VELOCITY_CONTROL)
             self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(float(value)))
         if self._poll:
             self._request_estimates()
+
+    def _on_write_efforts(self, efforts: np.ndarray) -> None:
+        """Joint torques [N m] -> motor torques (gear ratio, direction) ->
+        Set_Input_Torque, after switching each axis to torque control."""
+        motor = self.joints.to_motor_torques(np.asarray(efforts, float))
+        for i, (node, value) in enumerate(zip(self.joints.node_ids, motor)):
+            self._ensure_mode(i, ControlMode.TORQUE_CONTROL)
+            self._send(node, Cmd.SET_INPUT_TORQUE, proto.set_input_torque(float(value)))
+        if self._poll:
+            self._request_estimates()
+
+    def _ensure_mode(self, i: int, mode: ControlMode) -> None:
+        if self._mode[i] != mode:
+            # passthrough: the torque controller shapes its own setpoints
+            input_mode = self._input_mode if mode == ControlMode.VELOCITY_CONTROL \
+                else proto.InputMode.PASSTHROUGH
+            self._send(self.joints.node_ids[i], Cmd.SET_CONTROLLER_MODE,
+                       proto.set_controller_mode(mode, input_mode))
+            self._mode[i] = mode
 
     def status(self) -> dict[str, str]:
         out = super().status()
@@ -288,10 +313,11 @@ class OdriveCanDriver(CanDriver):
             self._send(node, Cmd.GET_ENCODER_ESTIMATES, b"", remote=True)
 
     def _idle_all(self) -> None:
-        """Zero setpoint and IDLE to every axis; tries all before raising."""
+        """Zero setpoints and IDLE to every axis; tries all before raising."""
         failure = None
         for node in self.joints.node_ids:
             for cmd, data in ((Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0)),
+                              (Cmd.SET_INPUT_TORQUE, proto.set_input_torque(0.0)),
                               (Cmd.SET_AXIS_STATE, proto.set_axis_state(AxisState.IDLE))):
                 try:
                     self._send(node, cmd, data)
