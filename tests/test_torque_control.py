@@ -225,3 +225,15 @@ def test_both_modes_follow_a_figure_eight_within_a_centimetre(mode):
     from holonomic_sim.torque_experiment import run as run_experiment
     result = run_experiment("xr4000", "figure-eight", mode)
     assert result["max_mm"] < 10.0 and result["max_heading_deg"] < 0.5, result
+
+
+def test_derived_g_dot_matches_a_numeric_derivative():
+    """The analytic dJ/dphi of every caster body against central differences."""
+    dyn = PcvDynamics.from_model(load_model_of("xr4000"))
+    h = 1e-6
+    for i in range(4):
+        for phi in np.linspace(-3.0, 3.0, 13):
+            fork, wheel, d_fork, d_wheel = dyn._caster_jacobians(i, phi)
+            plus, minus = dyn._caster_jacobians(i, phi + h), dyn._caster_jacobians(i, phi - h)
+            assert d_fork == pytest.approx((plus[0] - minus[0]) / (2 * h), abs=1e-6)
+            assert d_wheel == pytest.approx((plus[1] - minus[1]) / (2 * h), abs=1e-6)

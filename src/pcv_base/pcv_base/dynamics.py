@@ -22,8 +22,8 @@ whose bodies are the fork and the wheel:
   ``diag(m, m, I)`` plus every caster's bodies, eq. 4);
 * ``mu = sum_b J_b^T M_b (J_b_dot x_dot + Omega(wz) J_b x_dot)``: the
   derivative of the body velocities -- ``J_b_dot = dJ_b/dphi phi_dot`` with
-  ``phi_dot = C_steer x_dot`` (the paper's ``G_dot``; the partial derivative is
-  taken by a central difference, error ~1e-10) -- plus the rotation of the
+  ``phi_dot = C_steer x_dot`` (the paper's ``G_dot``, derived in
+  ``_caster_jacobians``) -- plus the rotation of the
   base frame (``Omega(wz) v = wz k x v`` on the linear parts), since x_ddot
   is a body-frame derivative.
 
@@ -95,36 +95,49 @@ class PcvDynamics:
         return cls(model.kinematics, BodyParams.from_model(model))
 
     # -- body Jacobians --------------------------------------------------------------
-    def _caster_jacobians(self, i: int, phi: float) -> tuple[np.ndarray, np.ndarray]:
-        """(J_fork 3x3, J_wheel 4x3): body velocities per unit base twist.
+    def _caster_jacobians(self, i: int, phi: float):
+        """(J_fork 3x3, J_wheel 4x3, dJ_fork/dphi, dJ_wheel/dphi): body
+        velocities per unit base twist, and their derivatives.
 
         Rows: fork centre (vx, vy) and yaw rate; wheel centre (vx, vy), yaw
-        rate and spin rate rho_dot (all in base_link components).
+        rate and spin rate rho_dot (all in base_link components). With
+        c = cos phi, s = sin phi, n = (-s, c), the steering row S and rolling
+        row R of G (eq. 2), a point ``arm`` behind the steering axis at
+        (sx - arm c, sy - arm s) moves at
+        ``[[1, 0, -py], [0, 1, px]] - arm n S``; the derivatives follow from
+        d(c, s)/dphi = (-s, c): dS = (-c/b, -s/b, h (sb c - cb s)/b),
+        dR = (-s/r, c/r, h (cb c + sb s)/r), dn = (-c, -s), d(px, py) =
+        arm (s, -c).
         """
         cas = self.kin.casters[i]
         sx, sy = cas.axis
-        b, r = cas.caster_offset, cas.wheel_radius
+        b, r, h = cas.caster_offset, cas.wheel_radius, cas.h
+        cb, sb = math.cos(cas.beta), math.sin(cas.beta)
         c, s = math.cos(phi), math.sin(phi)
         # steering and rolling rows of the constraint matrix (eq. 7 / G rows 1-2)
-        steer = np.array([-s / b, c / b,
-                          cas.h * (math.cos(cas.beta) * c + math.sin(cas.beta) * s) / b - 1.0])
-        roll = np.array([c / r, s / r,
-                         cas.h * (math.cos(cas.beta) * s - math.sin(cas.beta) * c) / r])
-        n_vec = np.array([-s, c])
+        steer = np.array([-s / b, c / b, h * (cb * c + sb * s) / b - 1.0])
+        roll = np.array([c / r, s / r, h * (cb * s - sb * c) / r])
+        d_steer = np.array([-c / b, -s / b, h * (sb * c - cb * s) / b])
+        d_roll = np.array([-s / r, c / r, h * (cb * c + sb * s) / r])
+        n_vec, d_n = np.array([-s, c]), np.array([-c, -s])
 
-        def point(px, py, arm):
-            # base velocity at (px, py) plus the fork's turn about the steering
-            # axis, which moves a point ``arm`` behind the axis by -arm phi_dot n
-            rows = np.array([[1.0, 0.0, -py], [0.0, 1.0, px]])
-            return rows - arm * np.outer(n_vec, steer)
+        def point(arm):
+            # base velocity at the point plus the fork's turn about the
+            # steering axis, which moves it by -arm phi_dot n
+            px, py = sx - arm * c, sy - arm * s
+            rows = np.array([[1.0, 0.0, -py], [0.0, 1.0, px]]) - arm * np.outer(n_vec, steer)
+            d_rows = (np.array([[0.0, 0.0, arm * c], [0.0, 0.0, arm * s]])
+                      - arm * (np.outer(d_n, steer) + np.outer(n_vec, d_steer)))
+            return rows, d_rows
 
         yaw = np.array([0.0, 0.0, 1.0]) + steer          # wz + phi_dot
-        fork = np.vstack([point(sx - 0.5 * b * c, sy - 0.5 * b * s, 0.5 * b), yaw])
-        wheel = np.vstack([point(sx - b * c, sy - b * s, b), yaw, roll])
-        return fork, wheel
+        fork_xy, d_fork_xy = point(0.5 * b)
+        wheel_xy, d_wheel_xy = point(b)
+        return (np.vstack([fork_xy, yaw]), np.vstack([wheel_xy, yaw, roll]),
+                np.vstack([d_fork_xy, d_steer]), np.vstack([d_wheel_xy, d_steer, d_roll]))
 
     def _jacobians(self, steer: np.ndarray):
-        return [self._caster_jacobians(i, float(phi)) for i, phi in enumerate(steer)]
+        return [self._caster_jacobians(i, float(phi))[:2] for i, phi in enumerate(steer)]
 
     # -- the operational-space terms ----------------------------------------------------
     def mass_matrix(self, positions) -> np.ndarray:
@@ -144,20 +157,15 @@ class PcvDynamics:
         mu = np.zeros(3)
         # the chassis: its centre is base_link's origin
         mu += self._chassis @ np.array([-wz * x_dot[1], wz * x_dot[0], 0.0])
-        h = 1e-6
         for i, phi in enumerate(steer):
-            fork, wheel = self._caster_jacobians(i, float(phi))
-            fork_p, wheel_p = self._caster_jacobians(i, float(phi) + h)
-            fork_m, wheel_m = self._caster_jacobians(i, float(phi) - h)
+            fork, wheel, d_fork, d_wheel = self._caster_jacobians(i, float(phi))
             cas = self.kin.casters[i]
             c, s = math.cos(phi), math.sin(phi)
             phi_dot = ((-s * x_dot[0] + c * x_dot[1]) / cas.caster_offset
                        + (cas.h * math.cos(cas.beta - phi) / cas.caster_offset - 1.0) * wz)
-            for J, Jp, Jm, masses in ((fork, fork_p, fork_m, self._fork_m),
-                                      (wheel, wheel_p, wheel_m, self._wheel_m)):
+            for J, dJ, masses in ((fork, d_fork, self._fork_m), (wheel, d_wheel, self._wheel_m)):
                 v = J @ x_dot
-                J_dot = (Jp - Jm) / (2 * h) * phi_dot
-                accel = J_dot @ x_dot
+                accel = (dJ * phi_dot) @ x_dot           # G_dot x_dot
                 accel[0] -= wz * v[1]               # the base frame turns: wz k x v
                 accel[1] += wz * v[0]
                 mu += J.T @ (masses * accel)
