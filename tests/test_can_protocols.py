@@ -66,7 +66,7 @@ def _frames_to(frames, nodes):
 def test_odrive_driver_sends_the_scripted_frames():
     """configure -> velocity mode and idle; activate -> clear errors, closed
     loop; write -> one Set_Input_Vel per axis in motor rev/s through gear and
-    direction; deactivate -> zero velocity and IDLE. HAMR wiring of
+    direction; deactivate -> zero velocity and torque, and IDLE. HAMR wiring of
     config/hamr.yaml: nodes 0, 1 (direction -1), 2 (gear 10)."""
     rig = CanRig("odrive_can", "hamr")
     try:
@@ -96,9 +96,11 @@ def test_odrive_driver_sends_the_scripted_frames():
 
         mark = len(rig.sniff())
         rig.driver.deactivate()
+        # zero velocity, zero torque (the axis may be in torque mode), IDLE
         assert _frames_to(rig.sniff()[mark:], {0, 1, 2}) == [
-            (0x00D, bytes(8)), (0x007, H("01000000")), (0x02D, bytes(8)), (0x027, H("01000000")),
-            (0x04D, bytes(8)), (0x047, H("01000000"))]
+            (0x00D, bytes(8)), (0x00E, bytes(4)), (0x007, H("01000000")),
+            (0x02D, bytes(8)), (0x02E, bytes(4)), (0x027, H("01000000")),
+            (0x04D, bytes(8)), (0x04E, bytes(4)), (0x047, H("01000000"))]
     finally:
         rig.close()
 
