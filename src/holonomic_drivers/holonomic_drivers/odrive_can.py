@@ -12,7 +12,7 @@ Safety logic (all checks run in ``read``, i.e. every control cycle):
   (``feedback_timeout``: the axis answers late) -> DriverCommunicationError;
 * while armed, an axis error or an axis that left closed-loop control ->
   DriverFault. The controller then calls ``deactivate``, which sends every
-  axis a zero velocity and IDLE in the same cycle;
+  axis a zero velocity, a zero torque and IDLE in the same cycle;
 * while disarmed a latched axis error is only reported (``status``); arming
   sends Clear_Errors and refuses, naming the axis, if the error does not
   clear or the axis does not reach closed-loop control within
