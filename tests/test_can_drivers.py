@@ -298,3 +298,44 @@ def test_odrive_torque_mode_switches_the_axes_and_sends_motor_torques(rig_factor
         assert struct.unpack("<f", last[proto.frame_id(node, proto.Cmd.SET_INPUT_TORQUE)])[0] == 0.0
         assert struct.unpack("<I", last[proto.frame_id(node, proto.Cmd.SET_AXIS_STATE)][:4])[0] \
             == proto.AxisState.IDLE
+
+
+def test_cia402_torque_mode_sends_rpdo2_with_cst_and_scaled_torque(rig_factory):
+    """write_efforts: RPDO2 = enable operation, 0x6071 in per mille of the
+    rated torque (emulated: 1 N m) through gear and direction, 0x6060 = 10;
+    the drives accelerate; a velocity command switches back to csv (SDO);
+    disarming sends zero torque; the next arming starts in csv."""
+    from holonomic_drivers import cia402_protocol as co
+    rig = rig_factory("cia402", "hamr")
+    assert rig.arm() == (True, "motors armed")
+    v = rig.config.values
+    joints = rig.model.joint_names
+    torques = np.array([0.02, -0.01, 0.05])
+    mark = len(rig.sniff())
+    rig.controller.driver.write_efforts(torques)
+    rpdo2 = {m.arbitration_id - 0x300: struct.unpack("<Hhb", bytes(m.data))
+             for m in rig.sniff()[mark:] if 0x300 <= m.arbitration_id < 0x380}
+    for node, joint, tau in zip(rig.node_ids, joints, torques):
+        motor = tau * v[f"cia402.joints.{joint}.direction"] / v[f"cia402.joints.{joint}.gear_ratio"]
+        assert rpdo2[node] == (0x000F, round(1000 * motor), 10)
+    for _ in range(20):                     # SYNCs apply it; the motors speed up
+        rig.controller.driver.write_efforts(torques)
+        rig.controller.driver.read()
+        time.sleep(0.005)
+    speeds = [d.velocity_rev_per_s for d in rig.devices]
+    assert all(np.sign(s) == np.sign(t * v[f"cia402.joints.{j}.direction"])
+               for s, t, j in zip(speeds, torques, joints)), speeds
+    assert all(d.get(co.MODES_DISPLAY) == 10 for d in rig.devices)
+    rig.controller.driver.write_velocities(np.zeros(3))
+    assert all(d.get(co.MODES_OF_OPERATION) == 9 for d in rig.devices)      # SDO, at once
+    rig.controller.driver.write_efforts(torques)
+    mark = len(rig.sniff())
+    rig.controller.request_enable(False)
+    rig.step()
+    stop = [(m.arbitration_id, bytes(m.data)) for m in rig.sniff()[mark:]
+            if 0x300 <= m.arbitration_id < 0x380]
+    assert stop == [(0x300 + n, struct.pack("<Hhb", 0x0007, 0, 10)) for n in rig.node_ids]
+    rig.run(0.6)              # the disabled drives ramp their free motors to standstill
+    assert rig.arm() == (True, "motors armed")
+    assert all(d.get(co.MODES_OF_OPERATION) == 9 and d.get(co.TARGET_TORQUE) == 0
+               for d in rig.devices)

@@ -181,6 +181,11 @@ def test_pdo_configuration_follows_cia301_order():
         (0x1600, 1, struct.pack("<I", 0x60400010)), (0x1600, 2, struct.pack("<I", 0x60FF0020)),
         (0x1600, 0, H("02"))]
     assert writes[6] == (0x1400, 1, struct.pack("<I", 0x205))
+    # RPDO2: controlword, target torque (16 bits), mode of operation (8 bits)
+    assert writes[7:14] == [
+        (0x1401, 1, struct.pack("<I", 0x80000305)), (0x1401, 2, H("01")), (0x1601, 0, H("00")),
+        (0x1601, 1, struct.pack("<I", 0x60400010)), (0x1601, 2, struct.pack("<I", 0x60710010)),
+        (0x1601, 3, struct.pack("<I", 0x60600008)), (0x1601, 0, H("03"))]
     assert (0x1A00, 1, struct.pack("<I", 0x60640020)) in writes
     assert (0x1A01, 2, struct.pack("<I", 0x603F0010)) in writes
     assert writes[-1] == (0x1803, 1, struct.pack("<I", 0x80000485))   # TPDO4 invalid
@@ -192,7 +197,8 @@ def _sdo_requests(frames, node):
 
 def test_cia402_driver_sends_the_scripted_frames():
     """configure: NMT pre-operational, device type, heartbeat producer and
-    consumer, mode csv, target 0, the PDO mapping, mode check, NMT start;
+    consumer, mode csv, target 0, the PDO mapping, mode check, supported
+    modes and rated torque (torque mode), NMT start;
     write: RPDO1 = enable operation + counts/s; deactivate: disable
     operation with target 0, then SYNC. HAMR wiring of config/hamr.yaml:
     nodes 1, 2 (direction -1), 3 (gear 10), 16384 counts/rev."""
@@ -209,7 +215,8 @@ def test_cia402_driver_sends_the_scripted_frames():
                     co.sdo_download_request(0x6060, 0, H("09")),
                     co.sdo_download_request(0x60FF, 0, bytes(4))]
         expected += [co.sdo_download_request(i, s, d) for i, s, d in pdo_configuration(2)]
-        expected.append(co.sdo_upload_request(0x6061, 0))
+        expected += [co.sdo_upload_request(0x6061, 0), co.sdo_upload_request(0x6502, 0),
+                     co.sdo_upload_request(0x6076, 0)]
         assert _sdo_requests(frames, 2) == expected
 
         rig.driver.activate()

@@ -13,8 +13,12 @@ one drive per joint, addressed by node id. What the driver sets up in
   velocity (3), checked in 0x6061;
 * the PDOs (transmission type 1, i.e. every SYNC):
   RPDO1 = controlword 0x6040 + target velocity 0x60FF,
+  RPDO2 = controlword + target torque 0x6071 + mode of operation 0x6060
+  (torque mode: the mode switches at the SYNC that applies the torque),
   TPDO1 = position actual 0x6064 + velocity actual 0x606C,
   TPDO2 = statusword 0x6041 + error code 0x603F; other PDOs disabled;
+* supported modes 0x6502 and motor rated torque 0x6076 (torque mode needs
+  cyclic synchronous torque and a rated torque to scale 0x6071);
 * NMT operational, then wait for the first PDOs and heartbeats.
 
 Every cycle ``read`` takes what the drives sent after the previous SYNC,
@@ -57,6 +61,10 @@ _INT32 = 2 ** 31 - 1
 
 #: the PDO layout the driver writes: (comm index, map index, [(object, sub, bits)])
 RPDO1_LAYOUT = [(co.CONTROLWORD, 0, 16), (co.TARGET_VELOCITY, 0, 32)]
+# torque mode: the mode of operation travels with the setpoint, so that the
+# switch to cyclic synchronous torque happens at the SYNC that applies it
+RPDO2_LAYOUT = [(co.CONTROLWORD, 0, 16), (co.TARGET_TORQUE, 0, 16),
+                (co.MODES_OF_OPERATION, 0, 8)]
 TPDO1_LAYOUT = [(co.POSITION_ACTUAL, 0, 32), (co.VELOCITY_ACTUAL, 0, 32)]
 TPDO2_LAYOUT = [(co.STATUSWORD, 0, 16), (co.ERROR_CODE, 0, 16)]
 
@@ -66,19 +74,20 @@ def pdo_configuration(node_id: int) -> list[tuple[int, int, bytes]]:
 
     Per CiA 301: invalidate the PDO (COB-ID bit 31), set the transmission
     type, zero the mapping count, write the entries, set the count, then
-    validate the COB-ID. PDOs 2..4 (RPDO) and 3..4 (TPDO) are invalidated.
+    validate the COB-ID. RPDOs 3..4 and TPDOs 3..4 are invalidated.
     """
     u8, u32 = (lambda v: struct.pack("<B", v)), (lambda v: struct.pack("<I", v))
     writes = []
     for comm, mapping, cob, layout in (
             (co.RPDO_COMM, co.RPDO_MAP, co.RPDO[0] + node_id, RPDO1_LAYOUT),
+            (co.RPDO_COMM + 1, co.RPDO_MAP + 1, co.RPDO[1] + node_id, RPDO2_LAYOUT),
             (co.TPDO_COMM, co.TPDO_MAP, co.TPDO[0] + node_id, TPDO1_LAYOUT),
             (co.TPDO_COMM + 1, co.TPDO_MAP + 1, co.TPDO[1] + node_id, TPDO2_LAYOUT)):
         writes += [(comm, 1, u32(cob | co.PDO_INVALID)), (comm, 2, u8(1)), (mapping, 0, u8(0))]
         writes += [(mapping, k + 1, u32(co.pdo_map_entry(*entry)))
                    for k, entry in enumerate(layout)]
         writes += [(mapping, 0, u8(len(layout))), (comm, 1, u32(cob))]
-    for k in (1, 2, 3):
+    for k in (2, 3):
         writes.append((co.RPDO_COMM + k, 1, u32(co.RPDO[k] + node_id | co.PDO_INVALID)))
     for k in (2, 3):
         writes.append((co.TPDO_COMM + k, 1, u32(co.TPDO[k] + node_id | co.PDO_INVALID)))
@@ -104,7 +113,9 @@ class _Drive:
 class Cia402Driver(CanDriver):
     name = "cia402"
     device_kind = "CANopen"
-    supports_effort = False
+    # Torque mode: cyclic synchronous torque (0x6060 = 10) through RPDO2 on
+    # drives that list it in 0x6502, scaled by their rated torque 0x6076.
+    supports_effort = True
 
     def __init__(self, model, params, control_rate: float):
         super().__init__(model, params, control_rate)
@@ -129,6 +140,10 @@ class Cia402Driver(CanDriver):
         self._counts_per_rev = np.array(counts)
         self._vel_units_per_rev_s = np.array(vel_units)
         self._drives = [_Drive() for _ in self.devices]
+        #: rated motor torque [N m] per drive (0: no cyclic synchronous torque)
+        self._rated_torque = [0.0] * len(self.devices)
+        #: drives last switched to torque mode
+        self._in_torque = [False] * len(self.devices)
         self._cob = {}
         for i, node in enumerate(self.joints.node_ids):
             self._cob[co.TPDO[0] + node] = (i, self._on_tpdo1)
@@ -237,6 +252,14 @@ class Cia402Driver(CanDriver):
         if mode != int(self._mode):
             raise DriverFault(f"did not take mode {self._mode.name} (0x6061 reads {mode})",
                               device)
+        # torque mode needs CST in 0x6502 and a rated torque to scale 0x6071
+        (supported,) = struct.unpack("<I", node.sdo.upload(co.SUPPORTED_MODES, 0)[:4])
+        try:
+            (rated,) = struct.unpack("<I", node.sdo.upload(co.MOTOR_RATED_TORQUE, 0)[:4])
+        except canopen.SdoAbortedError:
+            rated = 0                       # no 0x6076: no torque mode
+        cst = supported & (1 << (co.OpMode.CYCLIC_SYNCHRONOUS_TORQUE - 1))
+        self._rated_torque[i] = rated * 1e-3 if cst else 0.0
 
     def _on_activate(self) -> None:
         try:
@@ -267,6 +290,11 @@ class Cia402Driver(CanDriver):
                 raise DriverFault(f"fault persists after fault reset (error code 0x{code:04X})",
                                   device)
         node.sdo.download(co.TARGET_VELOCITY, 0, struct.pack("<i", 0))
+        if self._in_torque[i]:
+            # every arming starts in the configured velocity mode, target 0
+            node.sdo.download(co.TARGET_TORQUE, 0, struct.pack("<h", 0))
+            node.sdo.download(co.MODES_OF_OPERATION, 0, struct.pack("<b", int(self._mode)))
+            self._in_torque[i] = False
         for command, expected in ((Control.SHUTDOWN, State.READY_TO_SWITCH_ON),
                                   (Control.SWITCH_ON, State.SWITCHED_ON),
                                   (Control.ENABLE_OPERATION, State.OPERATION_ENABLED)):
@@ -339,9 +367,33 @@ class Cia402Driver(CanDriver):
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
         motor = self.joints.to_motor_velocities(np.asarray(velocities, float))
         units = np.clip(np.rint(motor * self._vel_units_per_rev_s), -_INT32, _INT32)
-        for node, value in zip(self.joints.node_ids, units):
+        for i, (node, value) in enumerate(zip(self.joints.node_ids, units)):
+            if self._in_torque[i]:
+                # back to the velocity mode: one SDO (RPDO1 does not carry it)
+                try:
+                    self._nodes[i].sdo.download(co.MODES_OF_OPERATION, 0,
+                                                struct.pack("<b", int(self._mode)))
+                except (canopen.SdoCommunicationError, canopen.SdoAbortedError) as exc:
+                    raise DriverCommunicationError(f"mode switch failed: {exc}",
+                                                   self.devices[i]) from exc
+                self._in_torque[i] = False
             self._send(co.RPDO[0] + node,
                        struct.pack("<Hi", Control.ENABLE_OPERATION, int(value)))
+
+    def _on_write_efforts(self, efforts: np.ndarray) -> None:
+        """Joint torques [N m] -> motor torques (gear, direction) -> 0x6071 in
+        per mille of each drive's rated torque, with 0x6060 = cyclic
+        synchronous torque, in RPDO2."""
+        motor = self.joints.to_motor_torques(np.asarray(efforts, float))
+        for i, (node, value) in enumerate(zip(self.joints.node_ids, motor)):
+            rated = self._rated_torque[i]
+            if rated <= 0.0:
+                raise DriverFault("has no cyclic synchronous torque mode (0x6502) or no "
+                                  "rated torque (0x6076)", self.devices[i])
+            units = int(np.clip(round(1000.0 * value / rated), -32767, 32767))
+            self._send(co.RPDO[1] + node, struct.pack(
+                "<Hhb", Control.ENABLE_OPERATION, units, co.OpMode.CYCLIC_SYNCHRONOUS_TORQUE))
+            self._in_torque[i] = True
 
     def status(self) -> dict[str, str]:
         out = super().status()
@@ -373,10 +425,13 @@ class Cia402Driver(CanDriver):
         self.counters["frames_sent"] += 1
 
     def _stop_all(self) -> None:
-        """Disable operation with a zero target on every drive, then SYNC now."""
+        """Disable operation with zero targets on every drive, then SYNC now."""
         failure = None
-        for node in self.joints.node_ids:
+        for i, node in enumerate(self.joints.node_ids):
             try:
+                if self._in_torque[i]:
+                    self._send(co.RPDO[1] + node, struct.pack(
+                        "<Hhb", Control.SWITCH_ON, 0, co.OpMode.CYCLIC_SYNCHRONOUS_TORQUE))
                 self._send(co.RPDO[0] + node, struct.pack("<Hi", Control.SWITCH_ON, 0))
             except DriverCommunicationError as exc:
                 failure = failure or exc

@@ -56,6 +56,8 @@ MODES_DISPLAY = 0x6061          # i8
 POSITION_ACTUAL = 0x6064        # i32 [position units]
 VELOCITY_ACTUAL = 0x606C        # i32 [velocity units]
 TARGET_VELOCITY = 0x60FF        # i32 [velocity units]
+TARGET_TORQUE = 0x6071          # i16 [per mille of the motor rated torque]
+MOTOR_RATED_TORQUE = 0x6076     # u32 [mN m]
 SUPPORTED_MODES = 0x6502        # u32 bit field
 
 PROFILE_402 = 402

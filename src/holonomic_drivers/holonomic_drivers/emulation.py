@@ -257,7 +257,9 @@ def _cia402_dictionary(node_id: int) -> dict[tuple[int, int], _Obj]:
         (co.POSITION_ACTUAL, 0): _Obj("<i", 0, False),
         (co.VELOCITY_ACTUAL, 0): _Obj("<i", 0, False),
         (co.TARGET_VELOCITY, 0): _Obj("<i", 0),
-        (co.SUPPORTED_MODES, 0): _Obj("<I", (1 << 2) | (1 << 8), False),   # pv, csv
+        (co.TARGET_TORQUE, 0): _Obj("<h", 0),
+        (co.MOTOR_RATED_TORQUE, 0): _Obj("<I", 1000, False),              # 1 N m
+        (co.SUPPORTED_MODES, 0): _Obj("<I", (1 << 2) | (1 << 8) | (1 << 9), False),  # pv csv cst
     }
     # four RPDOs and TPDOs with the predefined COB-IDs, RPDO1/TPDO1 valid
     for k in range(4):
@@ -275,7 +277,7 @@ def _cia402_dictionary(node_id: int) -> dict[tuple[int, int], _Obj]:
 class EmulatedCia402Drive(EmulatedDevice):
     """A CANopen CiA 402 drive: NMT, SDO server (expedited), heartbeat
     producer and consumer, SYNC, dynamic PDO mapping, EMCY, the 402 power
-    state machine and the velocity modes (pv, csv).
+    state machine, the velocity modes (pv, csv) and cyclic synchronous torque.
 
     Positions are in counts (``encoder_resolution`` per motor rev), speeds
     in counts/s. Failure injection: ``silent``; ``inject_fault(code)`` -- a
@@ -287,6 +289,9 @@ class EmulatedCia402Drive(EmulatedDevice):
     def __init__(self, node_id: int, channel: str, encoder_resolution: int = 4096,
                  max_acceleration: float = 200.0):
         super().__init__(channel, max_acceleration)
+        self._ramp = float(max_acceleration)
+        #: [kg m^2] of the free motor in cyclic synchronous torque
+        self.motor_inertia = 1e-4
         self.node_id = node_id
         self.encoder_resolution = encoder_resolution
         self.od = _cia402_dictionary(node_id)
@@ -469,7 +474,20 @@ class EmulatedCia402Drive(EmulatedDevice):
             self.state = co.State.SWITCH_ON_DISABLED      # quick stop option code 2
         if self.state is not co.State.OPERATION_ENABLED:
             return 0.0
+        if self.get(co.MODES_OF_OPERATION) == co.OpMode.CYCLIC_SYNCHRONOUS_TORQUE:
+            # a free motor: toward a far target at torque / inertia (_advance)
+            torque = self.get(co.TARGET_TORQUE)
+            return math.copysign(1e9, torque) if torque else self.velocity_rev_per_s
         return self.get(co.TARGET_VELOCITY) / self.encoder_resolution
+
+    def _advance(self, now: float) -> None:
+        if (self.get(co.MODES_OF_OPERATION) == co.OpMode.CYCLIC_SYNCHRONOUS_TORQUE
+                and self.state is co.State.OPERATION_ENABLED):
+            torque = self.get(co.TARGET_TORQUE) * 1e-3 * self.get(co.MOTOR_RATED_TORQUE) * 1e-3
+            self.max_acceleration = abs(torque) / self.motor_inertia / (2 * math.pi)
+        else:
+            self.max_acceleration = self._ramp
+        super()._advance(now)
 
     def cyclic(self, now: float) -> None:
         if not self._booted:
