@@ -208,6 +208,8 @@ def test_torque_distribution_produces_the_wrench_with_least_contact_force():
         contact = lambda t: kin.contact_to_joint(q).T @ t  # noqa: E731
         other = np.linalg.pinv(C).T @ force            # the Moore-Penrose split
         assert np.linalg.norm(contact(tau)) <= np.linalg.norm(contact(other)) + 1e-9
+        # the closed form is eq. 14 itself: C#^T F with C# = C_p^+ C_q^-1
+        np.testing.assert_allclose(tau, kin.jacobian(q).T @ force, atol=1e-9)
 
 
 def test_joint_saturation_keeps_the_direction_of_a_strafe():

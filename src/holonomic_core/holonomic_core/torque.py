@@ -125,8 +125,8 @@ class OperationalSpaceController:
         self._limit_reference(pose, e_pose)
         e_pose = np.clip(e_pose, -np.array(MAX_ERROR), MAX_ERROR)
         f_star = -self.kp * e_pose - self.kv * e_twist + accel
-        dyn = self.dynamics
-        self.wrench = dyn.mass_matrix(positions) @ f_star + dyn.bias(positions, twist)
+        lam, mu = self.dynamics.terms(positions, twist)
+        self.wrench = lam @ f_star + mu
         return self.distribute(positions, self.wrench)
 
     def distribute(self, positions, wrench) -> np.ndarray:

@@ -136,42 +136,42 @@ class PcvDynamics:
         return (np.vstack([fork_xy, yaw]), np.vstack([wheel_xy, yaw, roll]),
                 np.vstack([d_fork_xy, d_steer]), np.vstack([d_wheel_xy, d_steer, d_roll]))
 
-    def _jacobians(self, steer: np.ndarray):
-        return [self._caster_jacobians(i, float(phi))[:2] for i, phi in enumerate(steer)]
-
     # -- the operational-space terms ----------------------------------------------------
-    def mass_matrix(self, positions) -> np.ndarray:
-        """Lambda (3 x 3) [kg, kg m, kg m^2] at the joint ``positions``."""
+    def terms(self, positions, twist=None) -> tuple[np.ndarray, np.ndarray]:
+        """(Lambda (3 x 3) [kg, kg m, kg m^2], mu (3,) [N, N, N m]) at the joint
+        ``positions`` and base ``twist`` (mu = 0 without a twist), from one
+        pass over the casters' body Jacobians."""
         steer = np.asarray(positions, float)[0::2]
         lam = self._chassis.copy()
-        for fork, wheel in self._jacobians(steer):
-            lam += fork.T @ (self._fork_m[:, None] * fork)
-            lam += wheel.T @ (self._wheel_m[:, None] * wheel)
-        return lam
+        mu = np.zeros(3)
+        x_dot = None if twist is None else np.asarray(twist, float)
+        if x_dot is not None:
+            wz = x_dot[2]
+            # the chassis: its centre is base_link's origin
+            mu += self._chassis @ np.array([-wz * x_dot[1], wz * x_dot[0], 0.0])
+        for i, phi in enumerate(steer):
+            fork, wheel, d_fork, d_wheel = self._caster_jacobians(i, float(phi))
+            for J, dJ, masses in ((fork, d_fork, self._fork_m), (wheel, d_wheel, self._wheel_m)):
+                lam += J.T @ (masses[:, None] * J)
+                if x_dot is None:
+                    continue
+                v = J @ x_dot
+                phi_dot = v[2] - wz                      # the yaw row is wz + phi_dot
+                accel = (dJ * phi_dot) @ x_dot           # G_dot x_dot
+                accel[0] -= wz * v[1]                    # the base frame turns: wz k x v
+                accel[1] += wz * v[0]
+                mu += J.T @ (masses * accel)
+        return lam, mu
+
+    def mass_matrix(self, positions) -> np.ndarray:
+        """Lambda (3 x 3) [kg, kg m, kg m^2] at the joint ``positions``."""
+        return self.terms(positions)[0]
 
     def bias(self, positions, twist) -> np.ndarray:
         """mu (3,) [N, N, N m]: centripetal and coriolis wrench at ``twist``."""
-        steer = np.asarray(positions, float)[0::2]
-        x_dot = np.asarray(twist, float)
-        wz = x_dot[2]
-        mu = np.zeros(3)
-        # the chassis: its centre is base_link's origin
-        mu += self._chassis @ np.array([-wz * x_dot[1], wz * x_dot[0], 0.0])
-        for i, phi in enumerate(steer):
-            fork, wheel, d_fork, d_wheel = self._caster_jacobians(i, float(phi))
-            cas = self.kin.casters[i]
-            c, s = math.cos(phi), math.sin(phi)
-            phi_dot = ((-s * x_dot[0] + c * x_dot[1]) / cas.caster_offset
-                       + (cas.h * math.cos(cas.beta - phi) / cas.caster_offset - 1.0) * wz)
-            for J, dJ, masses in ((fork, d_fork, self._fork_m), (wheel, d_wheel, self._wheel_m)):
-                v = J @ x_dot
-                accel = (dJ * phi_dot) @ x_dot           # G_dot x_dot
-                accel[0] -= wz * v[1]               # the base frame turns: wz k x v
-                accel[1] += wz * v[0]
-                mu += J.T @ (masses * accel)
-        return mu
+        return self.terms(positions, twist)[1]
 
     def acceleration(self, positions, twist, wrench) -> np.ndarray:
         """x_ddot (body components) produced by ``wrench`` F at ``twist``."""
-        return np.linalg.solve(self.mass_matrix(positions),
-                               np.asarray(wrench, float) - self.bias(positions, twist))
+        lam, mu = self.terms(positions, twist)
+        return np.linalg.solve(lam, np.asarray(wrench, float) - mu)

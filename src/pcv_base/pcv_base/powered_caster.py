@@ -399,8 +399,27 @@ class PoweredCasterKinematics(BaseKinematics):
         Dual of ``slip_min``: power balance ``Gamma'.q_dot = F.x_dot`` with
         ``q_dot = C x_dot`` gives ``C^T Gamma' = F``, which C#^T satisfies
         because C# C = I.
+
+        Closed form (no pseudo-inverse per cycle): ``C_p^+T F`` is the
+        smallest set of contact forces f_i with sum f_i = (fx, fy) and
+        sum p_i x f_i = tz; Lagrange's conditions give f_i = (fx, fy)/n +
+        nu k x q_i about the contact centroid c (q_i = p_i - c) with
+        nu = (tz - c x (fx, fy)) / sum |q_i|^2. Then Gamma' = C_q^-T f:
+        steering torque b n_i . f_i, wheel torque r e_i . f_i.
         """
-        return self.jacobian(positions).T @ np.asarray(force, float)
+        fx, fy, tz = (float(v) for v in force)
+        phi = np.asarray(positions, float)[0::2]
+        c, s = np.cos(phi), np.sin(phi)
+        px, py = self.sx - self.b * c, self.sy - self.b * s
+        n = len(self.casters)
+        cx, cy = px.mean(), py.mean()
+        qx, qy = px - cx, py - cy
+        nu = (tz - (cx * fy - cy * fx)) / float((qx * qx + qy * qy).sum())
+        f_x, f_y = fx / n - nu * qy, fy / n + nu * qx
+        out = np.empty(2 * n)
+        out[0::2] = self.b * (-s * f_x + c * f_y)
+        out[1::2] = self.r * (c * f_x + s * f_y)
+        return out
 
     # -- configuration ------------------------------------------------------------
     @classmethod
