@@ -13,15 +13,8 @@ import time
 import numpy as np
 
 from holonomic_core.controller import BaseController, load_config
+from holonomic_core.loop import ManualClock
 from holonomic_core.mock_driver import MockDriver
-
-
-class _Clock:
-    def __init__(self):
-        self.t = 0.0
-
-    def __call__(self):
-        return self.t
 
 
 def _constraint_matrix(kin, q: np.ndarray) -> np.ndarray:
@@ -113,7 +106,7 @@ def cycle_compute(robot: str, cycles: int = 100_000) -> dict:
         k = i & 1023
         base.step(qs[k], dqs[k], targets[k])
 
-    clock = _Clock()
+    clock = ManualClock()
     driver = MockDriver(model, cfg.values, c.control_rate, clock=clock)
     driver.configure()
     ctrl = BaseController(cfg, driver, clock=clock)
@@ -125,7 +118,7 @@ def cycle_compute(robot: str, cycles: int = 100_000) -> dict:
         # changes every 64 cycles (e.g. a 3 Hz teleop at 200 Hz)
         if i & 63 == 0:
             ctrl.set_command(targets[(i >> 6) & 1023])
-        clock.t += ctrl.dt
+        clock.now += ctrl.dt
         ctrl.step()
 
     block = 5000
@@ -148,7 +141,7 @@ def simulation_speed(robot: str, seconds: float = 10.0, blocks: int = 20) -> dic
     from holonomic_sim.sim_driver import SimDriver
 
     cfg = load_config(robot, {"cmd_timeout": 0.0, "sim.physics_rate": 1000.0})
-    clock = _Clock()
+    clock = ManualClock()
     driver = SimDriver(cfg.model, cfg.values, cfg.controller.control_rate)
     driver.configure()
     ctrl = BaseController(cfg, driver, clock=clock)
@@ -163,7 +156,7 @@ def simulation_speed(robot: str, seconds: float = 10.0, blocks: int = 20) -> dic
         for _ in range(cycles):
             ctrl.set_command(twist)
             ctrl.step()
-            clock.t = ctrl.reading.stamp
+            clock.now = ctrl.reading.stamp
         spent["controller"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         world.step(cycles * driver.substeps)
@@ -183,7 +176,7 @@ def fleet_speed(robot: str, counts=(1, 2, 4, 6, 8, 12, 16), seconds: float = 3.0
 
     results = {}
     for n in counts:
-        clock = _Clock()
+        clock = ManualClock()
         cfg0 = load_config(robot, {"cmd_timeout": 0.0})
         world = SimWorld(cfg0.values["sim.physics_rate"])
         ctrls = []
@@ -201,7 +194,7 @@ def fleet_speed(robot: str, counts=(1, 2, 4, 6, 8, 12, 16), seconds: float = 3.0
         t0 = time.perf_counter()
         for _ in range(steps):
             world.step(substeps)
-            clock.t = world.time
+            clock.now = world.time
             for ctrl in ctrls:
                 ctrl.step()
         results[n] = seconds / (time.perf_counter() - t0)

@@ -10,18 +10,11 @@ import numpy as np
 import pytest
 
 from holonomic_core.controller import BaseController, load_config
+from holonomic_core.loop import ManualClock
 from holonomic_core.schema import ConfigError
 from holonomic_core.torque import OperationalSpaceController
 from pcv_base.dynamics import PcvDynamics
 from ros_probe import Bringup, Probe, wait_until
-
-
-class SimClock:
-    def __init__(self):
-        self.t = 0.0
-
-    def __call__(self):
-        return self.t
 
 
 @pytest.fixture
@@ -29,7 +22,7 @@ def xr4000_sim():
     """An armed XR4000 in the simulator (grippy floor: the model has no slip),
     driven in velocity mode to a turning, translating state."""
     cfg = load_config("xr4000", {"cmd_timeout": 0.0, "sim.wheel_friction": 2.0})
-    clock = SimClock()
+    clock = ManualClock()
     driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
     driver.configure()
     ctrl = BaseController(cfg, driver, clock=clock)
@@ -37,7 +30,7 @@ def xr4000_sim():
     for _ in range(400):
         ctrl.set_command((0.3, 0.1, 0.4))
         ctrl.step()
-        clock.t = ctrl.reading.stamp
+        clock.now = ctrl.reading.stamp
     yield cfg, driver, ctrl
     driver.close()
 
@@ -119,13 +112,13 @@ def test_unit_control_force_gives_the_commanded_acceleration(xr4000_sim):
 
 def torque_robot(**overrides):
     cfg = load_config("xr4000", {"cmd_timeout": 0.0, "control_mode": "torque", **overrides})
-    clock = SimClock()
+    clock = ManualClock()
     driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
     driver.configure()
     ctrl = BaseController(cfg, driver, clock=clock)
     ctrl.request_enable(True)
     ctrl.step()
-    clock.t = ctrl.reading.stamp
+    clock.now = ctrl.reading.stamp
     return driver, ctrl, clock
 
 
@@ -133,7 +126,7 @@ def run(ctrl, clock, twist, seconds):
     for _ in range(round(seconds / ctrl.dt)):
         ctrl.set_command(twist)
         ctrl.step()
-        clock.t = ctrl.reading.stamp
+        clock.now = ctrl.reading.stamp
         assert ctrl.fault is None, ctrl.fault
 
 
@@ -164,7 +157,7 @@ def test_torque_mode_follows_cmd_vel_and_stops_on_a_stale_command():
         # a command that stops coming: the reference decelerates to rest
         for _ in range(round(1.5 / ctrl.dt)):
             ctrl.step()
-            clock.t = ctrl.reading.stamp
+            clock.now = ctrl.reading.stamp
         assert ctrl.stale and np.abs(driver.ground_truth().twist).max() < 0.005
     finally:
         driver.close()

@@ -34,6 +34,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from holonomic_core.controller import BaseController, load_config
+from holonomic_core.loop import ManualClock
 from holonomic_core.odometry import wrap_angle
 
 
@@ -82,16 +83,6 @@ class Measurement:
         }
 
 
-class _Clock:
-    """Simulated time for the controller (and the mock driver)."""
-
-    def __init__(self):
-        self.now = 0.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 def _stop_speed(limit: float, deceleration: float, error: float) -> float:
     """Speed toward a target ``error`` away from which the base can still stop
     (90 % of the deceleration limit, for the one-cycle lag of the loop)."""
@@ -111,7 +102,7 @@ def time_move(robot, alpha: float, theta: float, distance: float, driver: str = 
     cfg = load_config(robot, {**(overrides or {}), "driver": driver, "cmd_timeout": 0.0,
                               "enable_on_start": True})
     c = cfg.controller
-    clock = _Clock()
+    clock = ManualClock()
     if driver == "mock":
         drv = cfg.driver_class(cfg.model, cfg.values, c.control_rate, clock=clock)
     else:
@@ -220,7 +211,7 @@ def rollout(robot, segments, sample_rate: float = 20.0,
     from holonomic_bringup.demo import body_command
     cfg = load_config(robot, {**(overrides or {}), "driver": "mock", "cmd_timeout": 0.0,
                               "enable_on_start": True})
-    clock = _Clock()
+    clock = ManualClock()
     drv = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate, clock=clock)
     dt = 1.0 / cfg.controller.control_rate
     every = max(1, round(cfg.controller.control_rate / sample_rate))

@@ -16,6 +16,18 @@ from typing import Callable
 import numpy as np
 
 
+class ManualClock:
+    """A clock its owner advances (``now`` [s]): simulated time for running
+    the controller offline, faster than real time (experiments, tools,
+    benchmarks, tests). Call it for the time, as ``time.monotonic``."""
+
+    def __init__(self, now: float = 0.0):
+        self.now = float(now)
+
+    def __call__(self) -> float:
+        return self.now
+
+
 class LoopStats:
     """Period and compute-time statistics over the last ``window`` cycles [s]."""
 

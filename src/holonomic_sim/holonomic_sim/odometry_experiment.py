@@ -32,6 +32,7 @@ import numpy as np
 
 from holonomic_core.controller import BaseController, load_config
 from holonomic_core.kinematics import ESTIMATORS
+from holonomic_core.loop import ManualClock
 from holonomic_core.odometry import Odometry, wrap_angle
 from holonomic_core.schema import ConfigError
 
@@ -57,16 +58,6 @@ class Trial:
     seconds: float = 0.0                 # [s] wall time of the simulation
 
 
-class _SimClock:
-    """The controller's clock: simulated time, advanced by the driver reads."""
-
-    def __init__(self):
-        self.now = 0.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, float, float]:
     """Proportional move to ``target`` (odom frame), as a body twist."""
     ex, ey = target[0] - pose[0], target[1] - pose[1]
@@ -88,7 +79,7 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
         overrides[f"limits.linear.{axis}.max_acceleration"] = acceleration
         overrides[f"limits.linear.{axis}.max_deceleration"] = acceleration
     cfg = load_config(robot, overrides)
-    clock = _SimClock()
+    clock = ManualClock()
     driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
     rng = np.random.default_rng(seed)
     wz_max = min(1.5, cfg.controller.max_velocity[2])

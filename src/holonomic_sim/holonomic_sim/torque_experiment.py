@@ -26,6 +26,7 @@ import numpy as np
 import pybullet as pb
 
 from holonomic_core.controller import BaseController, load_config
+from holonomic_core.loop import ManualClock
 from holonomic_core.odometry import wrap_angle
 
 
@@ -119,14 +120,6 @@ MODES = {  # name -> config overrides
 }
 
 
-class _Clock:
-    def __init__(self):
-        self.t = 0.0
-
-    def __call__(self):
-        return self.t
-
-
 def _traction(driver) -> float:
     """Largest friction force [N] of any wheel on the floor now."""
     robot, world = driver._robot, driver._world
@@ -142,7 +135,7 @@ def run(robot: str, trajectory: str, mode: str, friction: float = 1.0) -> dict:
     overrides = {**MODES[mode], "cmd_timeout": 0.0, "sim.wheel_friction": friction,
                  "enable_on_start": True}
     cfg = load_config(robot, overrides)
-    clock = _Clock()
+    clock = ManualClock()
     driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
     errors, headings, slip, traction = [], [], [], []
     with driver:
@@ -151,15 +144,15 @@ def run(robot: str, trajectory: str, mode: str, friction: float = 1.0) -> dict:
             ctrl.torque.distribution = "pinv"
         ctrl.request_enable(True)
         ctrl.step()
-        clock.t = ctrl.reading.stamp
-        start = clock.t
+        clock.now = ctrl.reading.stamp
+        start = clock.now
         ctrl.follow(sample)
-        while clock.t - start < duration:
+        while clock.now - start < duration:
             ctrl.step()
-            clock.t = ctrl.reading.stamp
+            clock.now = ctrl.reading.stamp
             if ctrl.fault is not None:
                 raise RuntimeError(f"{mode} on {trajectory}: controller fault: {ctrl.fault}")
-            t = clock.t - start
+            t = clock.now - start
             if t < duration / 2:
                 continue                      # the first lap settles the start
             ref = sample(t)
