@@ -21,7 +21,8 @@ import numpy as np
 from holonomic_core.controller import BaseController, load_config
 from holonomic_drivers import cia402_protocol as co
 from holonomic_drivers import odrive_protocol as proto
-from holonomic_drivers.emulation import EmulatedCia402Drive, EmulatedOdriveAxis, EmulatorThread
+from holonomic_drivers.emulated_cia402 import EmulatedCia402Drive
+from holonomic_drivers.emulation import EmulatedOdriveAxis, EmulatorThread
 
 _channels = itertools.count()
 

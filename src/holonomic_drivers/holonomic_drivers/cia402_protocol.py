@@ -41,6 +41,8 @@ class NmtState(enum.IntEnum):
 # -- objects -----------------------------------------------------------------------------
 DEVICE_TYPE = 0x1000            # u32, low 16 bits = profile number (402)
 ERROR_REGISTER = 0x1001
+GUARD_TIME = 0x100C              # u16 [ms], node guarding
+LIFE_TIME_FACTOR = 0x100D        # u8: life time = guard time x factor
 CONSUMER_HEARTBEAT_TIME = 0x1016  # sub 1: u32 = master node id << 16 | time [ms]
 PRODUCER_HEARTBEAT_TIME = 0x1017  # u16 [ms]
 RPDO_COMM = 0x1400              # + n - 1; sub 1 COB-ID, sub 2 transmission type
@@ -58,6 +60,9 @@ VELOCITY_ACTUAL = 0x606C        # i32 [velocity units]
 TARGET_VELOCITY = 0x60FF        # i32 [velocity units]
 TARGET_TORQUE = 0x6071          # i16 [per mille of the motor rated torque]
 MOTOR_RATED_TORQUE = 0x6076     # u32 [mN m]
+SI_UNIT_VELOCITY = 0x60A9       # u32, CiA 402 unit code of 0x606C/0x60FF
+GEAR_RATIO = 0x6091             # sub 1 motor revs, sub 2 shaft revs
+FEED_CONSTANT = 0x6092          # sub 1 feed, sub 2 shaft revs
 SUPPORTED_MODES = 0x6502        # u32 bit field
 
 PROFILE_402 = 402

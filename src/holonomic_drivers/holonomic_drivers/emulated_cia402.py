@@ -1,0 +1,534 @@
+"""An emulated CANopen CiA 402 drive on python-can's virtual bus.
+
+The drive's object dictionary is a ``canopen.LocalNode`` built from an EDS
+or DCF file (or the generic dictionary of :mod:`cia402_dictionary`), so
+canopen's own SDO server answers the master and enforces the file's data
+types, sizes and access rights. On top of it this module adds what a drive
+does: NMT, heartbeat producer and consumer, node guarding and life
+guarding, SYNC, PDOs as the master maps them (refusing objects the file
+does not allow in a PDO), EMCY, the CiA 402 power state machine per axis,
+the velocity modes (pv, csv) and cyclic synchronous torque (cst), and the
+motors.
+
+Users: the tests (drivers against drives as their EDS files describe them)
+and the CAN-in-the-loop simulation (``--sim-drives``), which plugs a
+simulated joint in as the motor. Constructor::
+
+    EmulatedCia402Drive(node_id, channel, eds=None, *, encoder_resolution=4096,
+                        velocity_resolution=None, max_acceleration=200.0,
+                        motor=None)
+
+* ``eds``: path of an EDS/DCF file, a ``canopen`` ObjectDictionary, or None
+  for the generic drive; multi-axis devices (profile objects at +0x800 per
+  axis) get one motor per axis;
+* ``encoder_resolution`` [counts per motor rev] of 0x6064;
+* ``velocity_resolution`` [units of 0x606C/0x60FF per motor rev/s]; None:
+  what the file's 0x60A9 says (rpm: 60, 0.1 rpm: 600, ...), else counts/s;
+* ``max_acceleration`` [motor rev/s^2] of the default :class:`IdealMotor`;
+* ``motor``: an object with the :class:`Motor` protocol (motor shaft, SI
+  units), or a sequence of them, one per axis.
+
+Run it by hand (``poll(now)`` handles waiting frames, ``tick(now)``
+advances the motors and sends what is due; ``now`` on the wall clock, that
+of python-can's frame timestamps) or with ``emulation.EmulatorThread``.
+Failure injection: ``silent`` (no frame leaves the device), ``sdo_silent``
+(no SDO answers), ``answer_every`` = k (TPDOs on every k-th SYNC only),
+``inject_fault(code, axis)`` (a fault condition that persists until
+``clear_condition()``).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from typing import Protocol, Sequence
+
+import can
+import canopen
+from canopen.objectdictionary import ObjectDictionary
+from canopen.sdo import SdoAbortedError
+
+from holonomic_drivers import cia402_protocol as co
+from holonomic_drivers.cia402_dictionary import (AXIS_OFFSET, MAX_AXES, AxisObjects,
+                                                 SI_VELOCITY_UNITS, generic_dictionary,
+                                                 mode_bit)
+from holonomic_drivers.cia402_protocol import OpMode, State
+
+TWO_PI = 2.0 * math.pi
+#: SDO abort codes (CiA 301) the drive uses beyond canopen's own
+ABORT_CANNOT_MAP = 0x06040041
+ABORT_PDO_TOO_LONG = 0x06040042
+ABORT_VALUE_RANGE = 0x06090030
+
+
+class Motor(Protocol):
+    """What drives a joint: motor shaft, SI units."""
+
+    def command_velocity(self, rad_per_s: float) -> None:
+        """Follow this speed [rad/s] (as the drive's velocity loop does)."""
+
+    def command_torque(self, newton_metre: float) -> None:
+        """Apply this torque [N m] (cyclic synchronous torque)."""
+
+    def position(self) -> float:
+        """Shaft angle [rad]."""
+
+    def velocity(self) -> float:
+        """Shaft speed [rad/s]."""
+
+    def advance(self, dt: float) -> None:
+        """Move on by ``dt`` [s] under the last command."""
+
+
+class IdealMotor:
+    """A motor that follows a commanded speed within ``max_acceleration``
+    [rad/s^2], and under a torque accelerates a free rotor of ``inertia``
+    [kg m^2]. Position and speed integrate exactly in each step."""
+
+    def __init__(self, max_acceleration: float = 200.0 * TWO_PI, inertia: float = 1e-4):
+        self.max_acceleration = float(max_acceleration)
+        self.inertia = float(inertia)
+        self._angle = 0.0
+        self._speed = 0.0
+        self._target = 0.0
+        self._torque: float | None = None
+
+    def command_velocity(self, rad_per_s: float) -> None:
+        self._target, self._torque = float(rad_per_s), None
+
+    def command_torque(self, newton_metre: float) -> None:
+        self._torque = float(newton_metre)
+
+    def position(self) -> float:
+        return self._angle
+
+    def velocity(self) -> float:
+        return self._speed
+
+    def advance(self, dt: float) -> None:
+        if dt <= 0.0:
+            return
+        start = self._speed
+        if self._torque is not None:
+            self._speed += self._torque / self.inertia * dt
+        else:
+            step = self.max_acceleration * dt
+            error = self._target - self._speed
+            self._speed = self._target if abs(error) <= step else \
+                self._speed + math.copysign(step, error)
+        self._angle += 0.5 * (start + self._speed) * dt
+
+
+@dataclass
+class _Axis:
+    """State of one axis of the device."""
+
+    objects: AxisObjects
+    motor: Motor
+    state: State = State.SWITCH_ON_DISABLED
+    condition: int = 0
+    controlword: int = 0
+
+
+class _DeviceNetwork(canopen.Network):
+    """canopen's Network on the device's own bus, with no receive thread (the
+    device reads its bus in ``poll``) and no periodic sender: canopen's NMT
+    slave would start a heartbeat thread when 0x1017 is written, but the
+    device sends its heartbeat itself so that ``silent`` silences it."""
+
+    def send_periodic(self, can_id, data, period, remote=False):
+        return _NoTask()
+
+
+class _NoTask:
+    def stop(self) -> None:
+        pass
+
+    def update(self, data) -> None:
+        pass
+
+
+@dataclass
+class _Guarding:
+    """Node guarding / life guarding state (CiA 301 7.2.8.3.2.1)."""
+
+    toggle: int = 0
+    last_request: float | None = None
+
+
+class EmulatedCia402Drive:
+    """See the module docstring."""
+
+    def __init__(self, node_id: int, channel: str, eds: str | ObjectDictionary | None = None,
+                 *, encoder_resolution: int = 4096, velocity_resolution: float | None = None,
+                 max_acceleration: float = 200.0, motor: Motor | Sequence[Motor] | None = None):
+        if isinstance(eds, ObjectDictionary):
+            od = eds
+        elif eds is None:
+            od = generic_dictionary(node_id)
+        else:
+            od = canopen.import_od(str(eds), node_id)
+        self.node_id = node_id
+        self.encoder_resolution = float(encoder_resolution)
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.network = _DeviceNetwork(self.bus)
+        self.node = canopen.LocalNode(node_id, od)
+        self.network.add_node(self.node)
+        count = sum(1 for k in range(MAX_AXES) if co.CONTROLWORD + AXIS_OFFSET * k in od)
+        if count == 0:
+            raise ValueError("the dictionary has no controlword 0x6040: not a CiA 402 drive")
+        if motor is None:
+            motors = [IdealMotor(max_acceleration * TWO_PI) for _ in range(count)]
+        elif isinstance(motor, Sequence):
+            motors = list(motor)
+        else:
+            motors = [motor]
+        if len(motors) != count:
+            raise ValueError(f"{count} axes in the dictionary, {len(motors)} motors given")
+        self.axes = [_Axis(AxisObjects(od, k), m) for k, m in enumerate(motors)]
+        self.velocity_resolution = [self._velocity_resolution(a.objects, velocity_resolution)
+                                    for a in self.axes]
+        #: no frame at all leaves the device (unplugged, dead CPU)
+        self.silent = False
+        #: no SDO answers (the SDO server hangs)
+        self.sdo_silent = False
+        #: TPDOs on every k-th SYNC only (the drive answers late)
+        self.answer_every = 1
+        self.nmt = co.NmtState.PRE_OPERATIONAL
+        self._lock = threading.RLock()
+        self._last_tick: float | None = None
+        self._booted = False
+        self._next_heartbeat = -math.inf
+        self._master_heartbeat: float | None = None
+        self._guarding = _Guarding()
+        self._syncs = 0
+        self._pending: dict[tuple[int, int], bytes] = {}
+        #: a write changed what the drive does: recompute it before the next step
+        self._dirty = True
+        self._heartbeat_period = 0.0
+        self._consumer: tuple[int, float] | None = None     # (master COB-ID, limit [s])
+        self._life_time = 0.0
+        self.node.add_write_callback(self._on_write)
+        self._reset_values()
+
+    # -- public view -------------------------------------------------------------------
+    def get(self, index: int, sub: int = 0):
+        """The current value of object ``index:sub`` (device index, no axis offset)."""
+        return self.node.object_dictionary.get_variable(index, sub).decode_raw(
+            self.node.get_data(index, sub))
+
+    def motor(self, axis: int = 0) -> Motor:
+        return self.axes[axis].motor
+
+    def state(self, axis: int = 0) -> State:
+        return self.axes[axis].state
+
+    @property
+    def position_rev(self) -> float:
+        """Axis 0's motor position [rev]."""
+        return self.axes[0].motor.position() / TWO_PI
+
+    @property
+    def velocity_rev_per_s(self) -> float:
+        """Axis 0's motor speed [rev/s]."""
+        return self.axes[0].motor.velocity() / TWO_PI
+
+    def inject_fault(self, error_code: int = 0x2310, axis: int = 0) -> None:
+        """A fault condition on ``axis`` (default 0x2310: continuous over-current)."""
+        with self._lock:
+            self.axes[axis].condition = error_code
+            self._fault(self.axes[axis], error_code)
+
+    def clear_condition(self) -> None:
+        """The fault conditions are gone; a fault reset from the master clears the fault."""
+        with self._lock:
+            for axis in self.axes:
+                axis.condition = 0
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+    # -- running -----------------------------------------------------------------------
+    def poll(self, now: float) -> None:
+        """Handle every frame waiting on the device's bus, each after the
+        motors were advanced to the frame's send time (a drive sampling on
+        SYNC samples when the SYNC was sent)."""
+        with self._lock:
+            while (msg := self.bus.recv(timeout=0.0)) is not None:
+                at = min(msg.timestamp or now, now)
+                self._advance(at)
+                if not self.silent and not msg.is_extended_id:
+                    self._handle(msg, at)
+
+    def tick(self, now: float) -> None:
+        """Advance the motors to ``now`` [s, wall clock] and send what is due."""
+        with self._lock:
+            self._advance(now)
+            if not self.silent:
+                self._cyclic(now)
+
+    # -- objects -----------------------------------------------------------------------
+    def _velocity_resolution(self, objects: AxisObjects, given: float | None) -> float:
+        if given is not None:
+            return float(given)
+        unit = objects.default(co.SI_UNIT_VELOCITY)
+        if unit is not None and unit in SI_VELOCITY_UNITS:
+            per_rev_s = SI_VELOCITY_UNITS[unit][1]
+            if per_rev_s is not None:
+                return per_rev_s
+        return self.encoder_resolution
+
+    def _put(self, objects: AxisObjects, index: int, value, sub: int = 0) -> None:
+        """Set an object of an axis from inside the drive (no access check)."""
+        if objects.has(index, sub):
+            self.node.set_data(objects.index(index), sub, objects.encode(index, sub, value))
+
+    def _value(self, objects: AxisObjects, index: int, default=0):
+        if not objects.has(index):
+            return default
+        return objects.decode(index, 0, self.node.get_data(objects.index(index), 0))
+
+    def _reset_values(self) -> None:
+        """Power-on values: the file's defaults, and each axis SWITCH ON DISABLED."""
+        self.node.data_store.clear()
+        self._pending.clear()
+        for axis in self.axes:
+            axis.state, axis.controlword = State.SWITCH_ON_DISABLED, 0
+            self._put(axis.objects, co.STATUSWORD, co.statusword_of(axis.state))
+        self._master_heartbeat = None
+        self._guarding = _Guarding()
+
+    def _axis_of(self, index: int) -> _Axis | None:
+        if 0x6000 <= index < 0x6000 + AXIS_OFFSET * len(self.axes):
+            return self.axes[(index - 0x6000) // AXIS_OFFSET]
+        return None
+
+    def _on_write(self, index: int, subindex: int, od, data: bytes, **_) -> None:
+        """canopen's SDO server (and our RPDOs) write through here: the drive
+        reacts, or refuses with an SDO abort code."""
+        self._dirty = True
+        axis = self._axis_of(index)
+        if axis is not None:
+            base = index - AXIS_OFFSET * axis.objects.axis
+            value = od.decode_raw(data)
+            if base == co.CONTROLWORD:
+                self._on_controlword(axis, value)
+            elif base == co.MODES_OF_OPERATION:
+                supported = axis.objects.default(co.SUPPORTED_MODES)
+                if value <= 0 or supported is not None and not supported & mode_bit(value):
+                    raise SdoAbortedError(ABORT_VALUE_RANGE)
+                self._put(axis.objects, co.MODES_DISPLAY, value)
+        elif co.RPDO_MAP <= index < co.RPDO_MAP + 0x200 or \
+                co.TPDO_MAP <= index < co.TPDO_MAP + 0x200:
+            self._check_mapping(index, subindex, od.decode_raw(data))
+
+    def _check_mapping(self, index: int, sub: int, value: int) -> None:
+        """A real drive refuses to map what its dictionary does not allow."""
+        if sub == 0:
+            entries = [self.get(index, s) for s in range(1, value + 1)]
+            if sum(e & 0xFF for e in entries) > 64:
+                raise SdoAbortedError(ABORT_PDO_TOO_LONG)
+            return
+        if value == 0:
+            return
+        target, target_sub, bits = value >> 16, (value >> 8) & 0xFF, value & 0xFF
+        try:
+            var = self.node.object_dictionary.get_variable(target, target_sub)
+        except KeyError:
+            var = None
+        if var is None or not var.pdo_mappable or len(var) != bits:
+            raise SdoAbortedError(ABORT_CANNOT_MAP)
+
+    # -- protocol ----------------------------------------------------------------------
+    def _handle(self, msg: can.Message, now: float) -> None:
+        cob, data = msg.arbitration_id, bytes(msg.data)
+        if msg.is_remote_frame:
+            if cob == co.HEARTBEAT + self.node_id:
+                self._on_guard_request(now)
+            return
+        if cob == co.NMT:
+            if len(data) == 2 and data[1] in (0, self.node_id):
+                self._on_nmt(data[0])
+        elif cob == co.SYNC:
+            self._on_sync()
+        elif cob == co.SDO_RX + self.node_id:
+            if self.nmt != co.NmtState.STOPPED and not self.sdo_silent:
+                self.network.notify(cob, data, now)
+        elif cob == self._master_cob():
+            self._master_heartbeat = now
+        elif self.nmt == co.NmtState.OPERATIONAL:
+            for k in range(self._pdo_count(co.RPDO_COMM)):
+                if cob == self.get(co.RPDO_COMM + k, 1):      # valid: bit 31 clear
+                    self._on_rpdo(k, data)
+
+    def _pdo_count(self, comm_base: int) -> int:
+        return self.axes[0].objects.pdo_count(comm_base)
+
+    def _master_cob(self) -> int | None:
+        return None if self._consumer is None else self._consumer[0]
+
+    def _refresh(self) -> None:
+        """Read back what writes changed: each axis's command, the heartbeat
+        period, the watchdog limits (cached: the emulator steps every ms)."""
+        self._dirty = False
+        od = self.node.object_dictionary
+        for axis, vres in zip(self.axes, self.velocity_resolution):
+            self._command(axis, vres)
+        self._heartbeat_period = (self.get(co.PRODUCER_HEARTBEAT_TIME) * 1e-3
+                                  if co.PRODUCER_HEARTBEAT_TIME in od else 0.0)
+        self._consumer = None
+        if co.CONSUMER_HEARTBEAT_TIME in od:
+            entry = self.get(co.CONSUMER_HEARTBEAT_TIME, 1)
+            if entry & 0xFFFF:
+                self._consumer = (co.HEARTBEAT + (entry >> 16 & 0x7F), (entry & 0xFFFF) * 1e-3)
+        self._life_time = (self.get(co.GUARD_TIME) * self.get(co.LIFE_TIME_FACTOR) * 1e-3
+                           if co.GUARD_TIME in od and co.LIFE_TIME_FACTOR in od else 0.0)
+
+    def _on_nmt(self, command: int) -> None:
+        if command == co.NmtCommand.START:
+            self.nmt = co.NmtState.OPERATIONAL
+        elif command == co.NmtCommand.STOP:
+            self.nmt = co.NmtState.STOPPED
+        elif command == co.NmtCommand.ENTER_PRE_OPERATIONAL:
+            self.nmt = co.NmtState.PRE_OPERATIONAL
+        elif command in (co.NmtCommand.RESET_NODE, co.NmtCommand.RESET_COMMUNICATION):
+            self._reset_values()
+            self.nmt = co.NmtState.PRE_OPERATIONAL
+            self._booted = False
+        if self.nmt != co.NmtState.OPERATIONAL:
+            for axis in self.axes:
+                if axis.state is State.OPERATION_ENABLED:
+                    # losing the PDO link while enabled is a communication fault
+                    self._fault(axis, 0x8100)
+
+    def _on_guard_request(self, now: float) -> None:
+        """Node guarding: answer the master's remote frame with the NMT state
+        and the toggle bit; the request also feeds life guarding."""
+        g = self._guarding
+        self.network.send_message(co.HEARTBEAT + self.node_id, bytes([self.nmt | g.toggle]))
+        g.toggle ^= 0x80
+        g.last_request = now
+
+    def _mapping(self, map_index: int) -> list[tuple[int, int, int]]:
+        entries = [self.get(map_index, s) for s in range(1, self.get(map_index, 0) + 1)]
+        return [(e >> 16, (e >> 8) & 0xFF, e & 0xFF) for e in entries]
+
+    def _on_rpdo(self, k: int, data: bytes) -> None:
+        offset, values = 0, {}
+        for index, sub, bits in self._mapping(co.RPDO_MAP + k):
+            n = bits // 8
+            if offset + n > len(data):
+                return          # a PDO shorter than its mapping is ignored
+            values[(index, sub)] = data[offset:offset + n]
+            offset += n
+        if self.get(co.RPDO_COMM + k, 2) <= 240:
+            self._pending.update(values)                    # applied at the next SYNC
+        else:
+            self._apply(values)
+
+    def _apply(self, values: dict[tuple[int, int], bytes]) -> None:
+        for (index, sub), raw in values.items():
+            try:
+                self.node.set_data(index, sub, raw)
+            except SdoAbortedError:
+                pass            # e.g. a mode the drive does not have: ignored
+
+    def _on_sync(self) -> None:
+        pending, self._pending = self._pending, {}
+        self._apply(pending)
+        if self.nmt != co.NmtState.OPERATIONAL:
+            return
+        self._syncs += 1
+        if self._syncs % self.answer_every:
+            return
+        self._update_feedback()
+        for k in range(self._pdo_count(co.TPDO_COMM)):
+            cob = self.get(co.TPDO_COMM + k, 1)
+            kind = self.get(co.TPDO_COMM + k, 2)
+            if cob & co.PDO_INVALID or not 1 <= kind <= 240 or self._syncs % kind:
+                continue
+            payload = b"".join(self.node.get_data(i, s)
+                               for i, s, _ in self._mapping(co.TPDO_MAP + k))
+            self.network.send_message(cob & 0x1FFFFFFF, payload)
+
+    def _on_controlword(self, axis: _Axis, word: int) -> None:
+        previous, axis.controlword = axis.controlword, word
+        if axis.state is State.FAULT:
+            if word & 0x80 and not previous & 0x80 and not axis.condition:
+                axis.state = State.SWITCH_ON_DISABLED
+                self._put(axis.objects, co.ERROR_CODE, 0)
+                if not any(a.state is State.FAULT for a in self.axes):
+                    self.node.set_data(co.ERROR_REGISTER, 0, b"\x00")
+        else:
+            axis.state = co.next_state(axis.state, word, previous)
+        self._put(axis.objects, co.STATUSWORD, co.statusword_of(axis.state))
+
+    def _fault(self, axis: _Axis, error_code: int) -> None:
+        axis.state = State.FAULT
+        self._dirty = True
+        self._put(axis.objects, co.STATUSWORD, co.statusword_of(axis.state))
+        self._put(axis.objects, co.ERROR_CODE, error_code)
+        self.node.set_data(co.ERROR_REGISTER, 0, b"\x01")
+        if not self.silent:
+            self.network.send_message(co.EMCY + self.node_id, co.emcy(error_code))
+
+    def _update_feedback(self) -> None:
+        for axis, vres in zip(self.axes, self.velocity_resolution):
+            o = axis.objects
+            self._put(o, co.STATUSWORD, co.statusword_of(axis.state))
+            self._put(o, co.POSITION_ACTUAL, _int32(round(
+                axis.motor.position() / TWO_PI * self.encoder_resolution)))
+            self._put(o, co.VELOCITY_ACTUAL, round(axis.motor.velocity() / TWO_PI * vres))
+
+    # -- time --------------------------------------------------------------------------
+    def _advance(self, now: float) -> None:
+        if self._last_tick is not None and now <= self._last_tick:
+            return
+        dt = 0.0 if self._last_tick is None else now - self._last_tick
+        self._last_tick = now
+        if self._dirty:
+            self._refresh()
+        self._watchdogs(now)
+        for axis in self.axes:
+            axis.motor.advance(dt)
+            if axis.state is State.QUICK_STOP_ACTIVE and axis.motor.velocity() == 0.0:
+                axis.state = State.SWITCH_ON_DISABLED      # quick stop option code 2
+                self._put(axis.objects, co.STATUSWORD, co.statusword_of(axis.state))
+
+    def _command(self, axis: _Axis, vres: float) -> None:
+        """What the axis's power stage does now: off / ramping down unless
+        OPERATION ENABLED, else the target of its mode of operation."""
+        o = axis.objects
+        if axis.state is not State.OPERATION_ENABLED:
+            axis.motor.command_velocity(0.0)
+        elif self._value(o, co.MODES_OF_OPERATION) == OpMode.CYCLIC_SYNCHRONOUS_TORQUE:
+            rated = self._value(o, co.MOTOR_RATED_TORQUE) * 1e-3          # mN m -> N m
+            axis.motor.command_torque(self._value(o, co.TARGET_TORQUE) * 1e-3 * rated)
+        else:
+            axis.motor.command_velocity(self._value(o, co.TARGET_VELOCITY) / vres * TWO_PI)
+
+    def _watchdogs(self, now: float) -> None:
+        """Heartbeat consumer (0x1016) and life guarding (0x100C x 0x100D):
+        the master went quiet -> every axis faults (0x8130, life guard error)."""
+        expired = (self._consumer is not None and self._master_heartbeat is not None
+                   and now - self._master_heartbeat > self._consumer[1])
+        last_guard = self._guarding.last_request
+        if self._life_time > 0 and last_guard is not None and now - last_guard > self._life_time:
+            expired = True
+        if expired:
+            for axis in self.axes:
+                if axis.state is not State.FAULT:
+                    self._fault(axis, 0x8130)
+
+    def _cyclic(self, now: float) -> None:
+        if not self._booted:
+            self._booted = True
+            self.network.send_message(co.HEARTBEAT + self.node_id, bytes([co.NmtState.BOOT_UP]))
+        if self._heartbeat_period > 0 and now >= self._next_heartbeat:
+            self._next_heartbeat = now + self._heartbeat_period
+            self.network.send_message(co.HEARTBEAT + self.node_id, bytes([self.nmt]))
+
+
+def _int32(value: int) -> int:
+    return (value + 2 ** 31) % 2 ** 32 - 2 ** 31
