@@ -88,25 +88,35 @@ class JointMap:
     #: joint rad -> motor rev: direction * gear_ratio / 2 pi
     motor_rev_per_rad: np.ndarray
     position_offset: np.ndarray
+    #: axis of a multi-axis device (0 for single-axis devices)
+    axes: tuple[int, ...] = ()
 
     @classmethod
-    def from_params(cls, prefix: str, joint_names, params: Mapping[str, Any]) -> "JointMap":
-        node_ids, scale, offsets = [], [], []
-        seen: dict[int, str] = {}
+    def from_params(cls, prefix: str, joint_names, params: Mapping[str, Any],
+                    axis_key: str | None = None) -> "JointMap":
+        """``axis_key``: per-joint key of the axis on a multi-axis device
+        (joints may then share a node id on different axes)."""
+        node_ids, scale, offsets, axes = [], [], [], []
+        seen: dict[tuple[int, int], str] = {}
         for joint in joint_names:
             base = f"{prefix}.joints.{joint}"
             node_id = int(params[f"{base}.node_id"])
-            if node_id in seen:
-                raise ConfigError(f"{base}.node_id", node_id,
-                                  f"an address not already used by {seen[node_id]}")
-            seen[node_id] = joint
+            axis = int(params[f"{base}.{axis_key}"]) if axis_key else 0
+            if (node_id, axis) in seen:
+                what = f"an address not already used by {seen[(node_id, axis)]}"
+                if axis_key:
+                    what += f" (or another {base}.{axis_key})"
+                raise ConfigError(f"{base}.node_id", node_id, what)
+            seen[(node_id, axis)] = joint
+            axes.append(axis)
             direction = int(params[f"{base}.direction"])
             if direction not in (-1, 1):
                 raise ConfigError(f"{base}.direction", direction, "+1 or -1")
             node_ids.append(node_id)
             scale.append(direction * float(params[f"{base}.gear_ratio"]) / TWO_PI)
             offsets.append(float(params[f"{base}.position_offset"]))
-        return cls(tuple(joint_names), tuple(node_ids), np.array(scale), np.array(offsets))
+        return cls(tuple(joint_names), tuple(node_ids), np.array(scale), np.array(offsets),
+                   tuple(axes))
 
     def to_joint_positions(self, motor_rev: np.ndarray) -> np.ndarray:
         """Motor positions [rev] -> joint positions [rad]."""
@@ -125,8 +135,10 @@ class JointMap:
         return joint_torques / (self.motor_rev_per_rad * TWO_PI)
 
     def device(self, i: int, kind: str) -> str:
-        """Name of joint ``i``'s device for messages: ``left_wheel_joint (ODrive node 3)``."""
-        return f"{self.joint_names[i]} ({kind} node {self.node_ids[i]})"
+        """Name of joint ``i``'s device for messages: ``left_wheel_joint (ODrive node 3)``,
+        ``turret_joint (CANopen node 4 axis 1)``."""
+        axis = f" axis {self.axes[i]}" if self.axes and self.axes[i] else ""
+        return f"{self.joint_names[i]} ({kind} node {self.node_ids[i]}{axis})"
 
 
 def open_bus(prefix: str, params: Mapping[str, Any]):
@@ -149,10 +161,12 @@ class CanDriver(Driver):
 
     #: how messages name a device: "ODrive", "CANopen"
     device_kind = ""
+    #: per-joint key of the axis on multi-axis devices (None: one axis per node)
+    axis_key: str | None = None
 
     def __init__(self, model, params, control_rate: float):
         super().__init__(model, params, control_rate)
-        self.joints = JointMap.from_params(self.name, model.joint_names, params)
+        self.joints = JointMap.from_params(self.name, model.joint_names, params, self.axis_key)
         #: "left_wheel_joint (ODrive node 0)", by joint index
         self.devices = tuple(self.joints.device(i, self.device_kind)
                              for i in range(len(self.joints.node_ids)))

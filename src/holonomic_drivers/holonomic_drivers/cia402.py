@@ -1,43 +1,70 @@
 """The ``cia402`` backend: CANopen drives with the CiA 402 profile.
 
 Built on the ``canopen`` package (its Network, SDO client and NMT master);
-one drive per joint, addressed by node id. What the driver sets up in
-``configure`` (all over SDO, each step checked):
+one drive axis per joint, addressed by node id (and ``axis`` on multi-axis
+devices). What the drive has comes from its EDS or DCF file
+(``cia402.joints.<joint>.eds`` or the bus-wide ``cia402.eds``), read with
+canopen's object dictionary: object sizes and types, which objects exist
+and may be mapped into PDOs, how many PDOs, the COB-ID flag bits, the modes
+of 0x6502, the watchdog objects and the velocity unit. Without a file the
+driver assumes the generic drive of :mod:`cia402_dictionary` (32-bit
+velocities, pv/csv/cst, heartbeat consumer, four PDOs each way).
+
+At construction (no bus yet, a ConfigError naming the key): the files are
+read, each joint's axis must exist in its file, the file must have the
+velocity objects, its 0x6502 must offer ``cia402.mode`` (the message names
+the modes it offers), torque mode needs 0x6071 and cst, and the drive
+must have the PDOs the joints on it need. Then ``configure`` (all over
+SDO, each step checked), per device:
 
 * NMT pre-operational; device type 0x1000 must name profile 402;
-* the drive's heartbeat producer 0x1017 and, with ``cia402.drive_watchdog``
-  > 0, its heartbeat consumer 0x1016 on *this* master's heartbeat -- which
-  the control loop itself sends, so a dead or hung controller faults the
-  drives and they stop on their own;
+* the watchdog: with a heartbeat consumer 0x1016, the drive's heartbeat
+  producer 0x1017 and its consumer on *this* master's heartbeat (which the
+  control loop itself sends); without 0x1016 but with node guarding
+  0x100C/0x100D, guarding (0x1017 = 0, guard time = the heartbeat period,
+  life time factor from ``cia402.drive_watchdog``; the loop sends the
+  guarding requests and the drive's answers count as its heartbeat);
+  without either, a warning that the drive will not stop by itself if the
+  controller dies. Either way a dead or hung controller faults the drives
+  and they stop on their own;
+
+and per axis:
+
 * mode of operation 0x6060: cyclic synchronous velocity (9) or profile
-  velocity (3), checked in 0x6061;
-* the PDOs (transmission type 1, i.e. every SYNC):
-  RPDO1 = controlword 0x6040 + target velocity 0x60FF,
-  RPDO2 = controlword + target torque 0x6071 + mode of operation 0x6060
-  (torque mode: the mode switches at the SYNC that applies the torque),
-  TPDO1 = position actual 0x6064 + velocity actual 0x606C,
-  TPDO2 = statusword 0x6041 + error code 0x603F; other PDOs disabled;
-* supported modes 0x6502 and motor rated torque 0x6076 (torque mode needs
-  cyclic synchronous torque and a rated torque to scale 0x6071);
+  velocity (3), checked in 0x6061; target velocity 0;
+* the PDOs (transmission type 1, i.e. every SYNC), numbered per device in
+  axis order: an RPDO with controlword 0x6040 + target velocity 0x60FF;
+  in torque mode (or, without a file, always, as before) an RPDO with
+  controlword + target torque 0x6071 + mode of operation 0x6060 (the mode
+  switches at the SYNC that applies the torque); a TPDO with position
+  actual 0x6064 + velocity actual 0x606C; a TPDO with statusword 0x6041
+  + error code 0x603F (0x603F only where the file lets it be mapped; the
+  error code then comes from the drive's EMCY); the other PDOs disabled;
+* supported modes 0x6502 (the mode must be in it) and motor rated torque
+  0x6076; the velocity unit 0x60A9 (with gear ratio 0x6091) where the
+  drive has them, against ``velocity_resolution``;
 * NMT operational, then wait for the first PDOs and heartbeats.
 
 Every cycle ``read`` takes what the drives sent after the previous SYNC,
 checks heartbeats, PDO age (late answers), NMT state and the 402 state,
-and sends SYNC (and the master heartbeat when due) in every case; ``write_velocities``
-sends RPDO1, which the drives apply at the next SYNC (one cycle of latency,
-as in any CSV set-up). ``activate`` walks the 402 state machine over SDO
-(fault reset if the fault is gone, shutdown, switch on, enable operation);
-``deactivate`` sends "disable operation" with a zero target followed by a
-SYNC at once: the drives ramp to standstill and switch their power stage off
-(their 0x605C option code decides how).
+and sends SYNC (and the master heartbeat or guarding requests when due)
+in every case; ``write_velocities`` sends the velocity RPDOs, which the
+drives apply at the next SYNC (one cycle of latency, as in any CSV
+set-up). ``activate`` walks the 402 state machine over SDO (fault reset if
+the fault is gone, shutdown, switch on, enable operation); ``deactivate``
+sends "disable operation" with a zero target followed by a SYNC at once:
+the drives ramp to standstill and switch their power stage off (their
+0x605C option code decides how).
 
-Drives whose TPDOs are fixed, or that need an EDS for vendor objects, are
-not covered: see README "CiA 402 drives".
+Drives whose TPDOs are fixed, or that need vendor objects, are not
+covered: see README "CiA 402 drives".
 """
 
 from __future__ import annotations
 
+import logging
 import math
+import os
 import struct
 import threading
 import time
@@ -53,50 +80,125 @@ from holonomic_core.driver import (DriverCommunicationError, DriverError, Driver
 from holonomic_core.schema import ConfigError, ParamSpec
 from holonomic_drivers import cia402_protocol as co
 from holonomic_drivers.can_link import CanDriver, bus_specs, joint_map_specs, open_bus
-from holonomic_drivers.cia402_protocol import Control, State
+from holonomic_drivers.cia402_dictionary import (MAX_AXES, SI_VELOCITY_UNITS, AxisObjects,
+                                                 DictionaryError, generic_dictionary,
+                                                 load_dictionary, mode_bit, mode_names)
+from holonomic_drivers.cia402_protocol import Control, OpMode, State
 
 PREFIX = "cia402"
-_MODES = {"csv": co.OpMode.CYCLIC_SYNCHRONOUS_VELOCITY, "pv": co.OpMode.PROFILE_VELOCITY}
-_INT32 = 2 ** 31 - 1
+_MODES = {"csv": OpMode.CYCLIC_SYNCHRONOUS_VELOCITY, "pv": OpMode.PROFILE_VELOCITY}
+_log = logging.getLogger(__name__)
 
-#: the PDO layout the driver writes: (comm index, map index, [(object, sub, bits)])
-RPDO1_LAYOUT = [(co.CONTROLWORD, 0, 16), (co.TARGET_VELOCITY, 0, 32)]
+#: what each PDO carries: (profile object, sub) in order
+RX_VELOCITY = ((co.CONTROLWORD, 0), (co.TARGET_VELOCITY, 0))
 # torque mode: the mode of operation travels with the setpoint, so that the
 # switch to cyclic synchronous torque happens at the SYNC that applies it
-RPDO2_LAYOUT = [(co.CONTROLWORD, 0, 16), (co.TARGET_TORQUE, 0, 16),
-                (co.MODES_OF_OPERATION, 0, 8)]
-TPDO1_LAYOUT = [(co.POSITION_ACTUAL, 0, 32), (co.VELOCITY_ACTUAL, 0, 32)]
-TPDO2_LAYOUT = [(co.STATUSWORD, 0, 16), (co.ERROR_CODE, 0, 16)]
+RX_TORQUE = ((co.CONTROLWORD, 0), (co.TARGET_TORQUE, 0), (co.MODES_OF_OPERATION, 0))
+TX_FEEDBACK = ((co.POSITION_ACTUAL, 0), (co.VELOCITY_ACTUAL, 0))
+TX_STATUS = ((co.STATUSWORD, 0), (co.ERROR_CODE, 0))
+#: objects a velocity-controlled axis cannot do without
+_REQUIRED = (co.CONTROLWORD, co.STATUSWORD, co.MODES_OF_OPERATION, co.MODES_DISPLAY,
+             co.POSITION_ACTUAL, co.VELOCITY_ACTUAL, co.TARGET_VELOCITY)
+
+
+@dataclass(frozen=True)
+class PdoPlan:
+    """The PDOs of one device (node): ``rx``/``tx`` map a PDO number
+    (0-based) to its mapping entries ``(index, sub, bits)``, absolute
+    indices (axis offset included); ``cob_ids`` the COB-ID of each PDO used
+    (flags from the file); ``rx_count``/``tx_count`` the PDOs the device
+    has (the unused ones are invalidated)."""
+
+    node_id: int
+    rx: dict[int, tuple[tuple[int, int, int], ...]]
+    tx: dict[int, tuple[tuple[int, int, int], ...]]
+    rx_cob: dict[int, int]
+    tx_cob: dict[int, int]
+    rx_count: int
+    tx_count: int
+    invalid_rx: tuple[int, ...]
+    invalid_tx: tuple[int, ...]
+
+    def writes(self) -> list[tuple[int, int, bytes]]:
+        """The SDO downloads ``(index, subindex, data)`` that set up the PDOs.
+
+        Per CiA 301: invalidate the PDO (COB-ID bit 31), set the transmission
+        type, zero the mapping count, write the entries, set the count, then
+        validate the COB-ID; the PDOs not used are invalidated.
+        """
+        u8, u32 = (lambda v: struct.pack("<B", v)), (lambda v: struct.pack("<I", v))
+        writes = []
+        for comm, mapping, pdos, cobs in ((co.RPDO_COMM, co.RPDO_MAP, self.rx, self.rx_cob),
+                                          (co.TPDO_COMM, co.TPDO_MAP, self.tx, self.tx_cob)):
+            for k, entries in sorted(pdos.items()):
+                cob = cobs[k]
+                writes += [(comm + k, 1, u32(cob | co.PDO_INVALID)), (comm + k, 2, u8(1)),
+                           (mapping + k, 0, u8(0))]
+                writes += [(mapping + k, n + 1, u32(co.pdo_map_entry(*entry)))
+                           for n, entry in enumerate(entries)]
+                writes += [(mapping + k, 0, u8(len(entries))), (comm + k, 1, u32(cob))]
+        for k in self.invalid_rx:
+            writes.append((co.RPDO_COMM + k, 1, u32(self._invalid_cob(co.RPDO, k))))
+        for k in self.invalid_tx:
+            writes.append((co.TPDO_COMM + k, 1, u32(self._invalid_cob(co.TPDO, k))))
+        return writes
+
+    def _invalid_cob(self, base, k: int) -> int:
+        return (base[k] + self.node_id if k < 4 else 0) | co.PDO_INVALID
+
+
+def plan_pdos(node_id: int, axes: list[tuple[AxisObjects, bool]]) -> PdoPlan:
+    """The PDO plan of one device whose axes are ``(objects, torque)`` in
+    axis order: per axis the velocity RPDO (+ the torque RPDO if
+    ``torque``), the feedback TPDO and the status TPDO, numbered in that
+    order. Raises ValueError (one line) if the device has too few PDOs."""
+    device = axes[0][0]
+    rx_count, tx_count = device.pdo_count(co.RPDO_COMM), device.pdo_count(co.TPDO_COMM)
+    rx, tx = {}, {}
+    for objects, torque in axes:
+        rx[len(rx)] = _entries(objects, RX_VELOCITY)
+        if torque:
+            rx[len(rx)] = _entries(objects, RX_TORQUE)
+        tx[len(tx)] = _entries(objects, TX_FEEDBACK)
+        tx[len(tx)] = _entries(objects, TX_STATUS)
+    if len(rx) > rx_count or len(tx) > tx_count:
+        raise ValueError(f"needs {len(rx)} RPDOs and {len(tx)} TPDOs, the drive has "
+                         f"{rx_count} and {tx_count}")
+
+    def cob(base, comm, k):
+        if k < 4:
+            ident = base[k] + node_id           # predefined connection set
+        else:
+            ident = device.cob_id_default(comm + k) or 0
+            if not ident:
+                raise ValueError(f"PDO {k + 1} has no default COB-ID in the file")
+        return ident | device.cob_id_flags(comm + k)
+
+    return PdoPlan(node_id, rx, tx,
+                   {k: cob(co.RPDO, co.RPDO_COMM, k) for k in rx},
+                   {k: cob(co.TPDO, co.TPDO_COMM, k) for k in tx},
+                   rx_count, tx_count,
+                   tuple(k for k in range(min(rx_count, 4)) if k not in rx),
+                   tuple(k for k in range(min(tx_count, 4)) if k not in tx))
+
+
+def _entries(objects: AxisObjects, layout) -> tuple[tuple[int, int, int], ...]:
+    """Mapping entries of the objects of ``layout`` that the axis may map
+    (the error code is left out where it cannot be)."""
+    return tuple((objects.index(index), sub, objects.bits(index, sub)) for index, sub in layout
+                 if objects.mappable(index, sub) or index != co.ERROR_CODE)
 
 
 def pdo_configuration(node_id: int) -> list[tuple[int, int, bytes]]:
-    """The SDO downloads ``(index, subindex, data)`` that set up the PDOs.
-
-    Per CiA 301: invalidate the PDO (COB-ID bit 31), set the transmission
-    type, zero the mapping count, write the entries, set the count, then
-    validate the COB-ID. RPDOs 3..4 and TPDOs 3..4 are invalidated.
-    """
-    u8, u32 = (lambda v: struct.pack("<B", v)), (lambda v: struct.pack("<I", v))
-    writes = []
-    for comm, mapping, cob, layout in (
-            (co.RPDO_COMM, co.RPDO_MAP, co.RPDO[0] + node_id, RPDO1_LAYOUT),
-            (co.RPDO_COMM + 1, co.RPDO_MAP + 1, co.RPDO[1] + node_id, RPDO2_LAYOUT),
-            (co.TPDO_COMM, co.TPDO_MAP, co.TPDO[0] + node_id, TPDO1_LAYOUT),
-            (co.TPDO_COMM + 1, co.TPDO_MAP + 1, co.TPDO[1] + node_id, TPDO2_LAYOUT)):
-        writes += [(comm, 1, u32(cob | co.PDO_INVALID)), (comm, 2, u8(1)), (mapping, 0, u8(0))]
-        writes += [(mapping, k + 1, u32(co.pdo_map_entry(*entry)))
-                   for k, entry in enumerate(layout)]
-        writes += [(mapping, 0, u8(len(layout))), (comm, 1, u32(cob))]
-    for k in (2, 3):
-        writes.append((co.RPDO_COMM + k, 1, u32(co.RPDO[k] + node_id | co.PDO_INVALID)))
-    for k in (2, 3):
-        writes.append((co.TPDO_COMM + k, 1, u32(co.TPDO[k] + node_id | co.PDO_INVALID)))
-    return writes
+    """The PDO set-up of a drive without an EDS file (the generic drive):
+    RPDO1 velocity, RPDO2 torque, TPDO1 feedback, TPDO2 status, 3..4
+    invalidated."""
+    return plan_pdos(node_id, [(AxisObjects(generic_dictionary(node_id)), True)]).writes()
 
 
 @dataclass
 class _Drive:
-    """What the driver last heard from one drive (times on the driver clock)."""
+    """What the driver last heard from one drive axis (times on the driver clock)."""
 
     nmt_state: int | None = None
     heartbeat_time: float = -math.inf
@@ -110,11 +212,26 @@ class _Drive:
     emcy_code: int = 0
 
 
+@dataclass(frozen=True)
+class _Wiring:
+    """One joint's axis as the driver uses it: its objects, and the COB-IDs
+    and layouts of its PDOs."""
+
+    objects: AxisObjects
+    rx_velocity: int
+    rx_torque: int | None
+    tx_feedback: int
+    tx_status: int
+    feedback: tuple[tuple[int, int, int], ...]
+    status: tuple[tuple[int, int, int], ...]
+
+
 class Cia402Driver(CanDriver):
     name = "cia402"
     device_kind = "CANopen"
-    # Torque mode: cyclic synchronous torque (0x6060 = 10) through RPDO2 on
-    # drives that list it in 0x6502, scaled by their rated torque 0x6076.
+    axis_key = "axis"
+    # Torque mode: cyclic synchronous torque (0x6060 = 10) through a second
+    # RPDO on drives that list it in 0x6502, scaled by their rated torque 0x6076.
     supports_effort = True
 
     def __init__(self, model, params, control_rate: float):
@@ -139,23 +256,114 @@ class Cia402Driver(CanDriver):
             vel_units.append(vres if vres > 0 else res)
         self._counts_per_rev = np.array(counts)
         self._vel_units_per_rev_s = np.array(vel_units)
+        torque_mode = params.get("control_mode") == "torque"
+        self._objects = self._load_objects(params, model.joint_names, torque_mode)
+        #: node id -> the joints (indices) on that device, in axis order
+        self._node_joints: dict[int, list[int]] = {}
+        for i in sorted(range(len(self.devices)), key=lambda i: self.joints.axes[i]):
+            self._node_joints.setdefault(self.joints.node_ids[i], []).append(i)
+        self._plans: dict[int, PdoPlan] = {}
+        self._wiring: list[_Wiring | None] = [None] * len(self.devices)
+        for node, joints in self._node_joints.items():
+            # without a file, the torque RPDO is mapped always (as before files)
+            with_torque = [bool(self._objects[i].source == "" or torque_mode) for i in joints]
+            try:
+                plan = plan_pdos(node, [(self._objects[i], t)
+                                        for i, t in zip(joints, with_torque)])
+            except ValueError as exc:
+                raise ConfigError(self._eds_key(joints[0]), self._objects[joints[0]].source,
+                                  f"a drive with the PDOs its joints need ({exc})") from None
+            self._plans[node] = plan
+            rx, tx = iter(sorted(plan.rx)), iter(sorted(plan.tx))
+            for i, torque in zip(joints, with_torque):
+                velocity = next(rx)
+                torque_pdo = next(rx) if torque else None
+                feedback, status = next(tx), next(tx)
+                self._wiring[i] = _Wiring(self._objects[i], plan.rx_cob[velocity],
+                                          None if torque_pdo is None else plan.rx_cob[torque_pdo],
+                                          plan.tx_cob[feedback] & 0x7FF,
+                                          plan.tx_cob[status] & 0x7FF,
+                                          plan.tx[feedback], plan.tx[status])
         self._drives = [_Drive() for _ in self.devices]
         #: rated motor torque [N m] per drive (0: no cyclic synchronous torque)
         self._rated_torque = [0.0] * len(self.devices)
         #: drives last switched to torque mode
         self._in_torque = [False] * len(self.devices)
-        self._cob = {}
+        #: node id -> "heartbeat" (0x1016), "guarding" (0x100C/0x100D) or "none"
+        self._watchdog_kind: dict[int, str] = {}
+        #: messages a user must see (also in ``status``)
+        self.warnings: list[str] = []
+        self._cob: dict[int, list[tuple[int, Callable]]] = {}
         for i, node in enumerate(self.joints.node_ids):
-            self._cob[co.TPDO[0] + node] = (i, self._on_tpdo1)
-            self._cob[co.TPDO[1] + node] = (i, self._on_tpdo2)
-            self._cob[co.HEARTBEAT + node] = (i, self._on_heartbeat)
-            self._cob[co.EMCY + node] = (i, self._on_emcy)
+            w = self._wiring[i]
+            for cob, handler in ((w.tx_feedback, self._on_feedback),
+                                 (w.tx_status, self._on_status),
+                                 (co.HEARTBEAT + node, self._on_heartbeat),
+                                 (co.EMCY + node, self._on_emcy)):
+                self._cob.setdefault(cob, []).append((i, handler))
         self._lock = threading.Lock()
         self._network = None
-        self._nodes = []
+        self._nodes: dict[int, canopen.RemoteNode] = {}
         self._next_master_heartbeat = -math.inf
         self._sync_time = -math.inf
         self.counters = {"bad_frames": 0, "emcy": 0, "syncs": 0, "frames_sent": 0}
+
+    def _eds_key(self, i: int) -> str:
+        joint_key = f"{PREFIX}.joints.{self.joints.joint_names[i]}.eds"
+        return joint_key if self.params.get(joint_key) else f"{PREFIX}.eds"
+
+    def _load_objects(self, params, joint_names, torque_mode: bool) -> list[AxisObjects]:
+        """Each joint's axis from its EDS/DCF (or the generic drive), checked
+        for what the configured mode needs; ConfigError naming the key."""
+        default = str(params.get(f"{PREFIX}.eds", ""))
+        loaded: dict[tuple[str, int], object] = {}
+        out = []
+        for i, joint in enumerate(joint_names):
+            path = str(params.get(f"{PREFIX}.joints.{joint}.eds", "")) or default
+            path = os.path.expanduser(path)
+            node, axis = self.joints.node_ids[i], self.joints.axes[i]
+            key = self._eds_key(i)
+            if not path:
+                if axis:
+                    raise ConfigError(f"{PREFIX}.joints.{joint}.axis", axis,
+                                      "0 for a drive without an EDS file (set "
+                                      f"{PREFIX}.joints.{joint}.eds for a multi-axis device)")
+                out.append(AxisObjects(generic_dictionary(node)))
+                continue
+            if (path, node) not in loaded:
+                try:
+                    loaded[(path, node)] = load_dictionary(path, node)
+                except DictionaryError as exc:
+                    raise ConfigError(key, path, f"a readable EDS/DCF file ({exc})") from None
+            objects = AxisObjects(loaded[(path, node)], axis, path)
+            if not objects.has(co.CONTROLWORD):
+                axes = sum(1 for k in range(MAX_AXES)
+                           if AxisObjects(objects.od, k).has(co.CONTROLWORD))
+                raise ConfigError(f"{PREFIX}.joints.{joint}.axis", axis,
+                                  f"an axis of {path} (it has {axes}: 0..{axes - 1})")
+            missing = [f"0x{objects.index(x):04X}" for x in _REQUIRED if not objects.has(x)]
+            if missing:
+                raise ConfigError(key, path, "the EDS of a CiA 402 velocity drive (it lacks "
+                                  f"{', '.join(missing)})")
+            unmappable = [f"0x{objects.index(x):04X}" for x, _ in RX_VELOCITY + TX_FEEDBACK
+                          + ((co.STATUSWORD, 0),) if not objects.mappable(x)]
+            if unmappable:
+                raise ConfigError(key, path, "a drive whose velocity objects can be mapped "
+                                  f"into PDOs ({', '.join(unmappable)} cannot)")
+            offered = objects.default(co.SUPPORTED_MODES)
+            if offered is not None and not int(offered) & mode_bit(self._mode):
+                raise ConfigError(f"{PREFIX}.mode", self.params[f"{PREFIX}.mode"],
+                                  f"a mode that {joint}'s drive offers in 0x6502 ({path}: "
+                                  f"{mode_names(int(offered))})")
+            if torque_mode:
+                cst = offered is None or int(offered) & mode_bit(OpMode.CYCLIC_SYNCHRONOUS_TORQUE)
+                if not (cst and objects.mappable(co.TARGET_TORQUE)
+                        and objects.has(co.MOTOR_RATED_TORQUE)):
+                    raise ConfigError("control_mode", "torque",
+                                      f"'velocity': {joint}'s drive ({path}) has no cyclic "
+                                      "synchronous torque with a mappable 0x6071 and 0x6076")
+            out.append(objects)
+        return out
 
     @classmethod
     def param_specs(cls, model) -> list[ParamSpec]:
@@ -165,29 +373,44 @@ class Cia402Driver(CanDriver):
                       "[counts/rev].", minimum=0.0, exclusive_minimum=True, maximum=1e12),
             ParamSpec(f"{PREFIX}.joints.{{joint}}.velocity_resolution", "double",
                       "Velocity units (0x606C, 0x60FF) per motor rev/s of {joint}'s drive; "
-                      "0: counts/s, i.e. encoder_resolution (60 for a drive in rpm).",
+                      "0: counts/s, i.e. encoder_resolution (60 for a drive in rpm, 600 in "
+                      "0.1 rpm); checked against the drive's 0x60A9 where it has one.",
                       default=0.0, minimum=0.0, maximum=1e12),
+            ParamSpec(f"{PREFIX}.joints.{{joint}}.eds", "string",
+                      "EDS or DCF file of {joint}'s drive (path); empty: the bus-wide "
+                      "cia402.eds.", default=""),
+            ParamSpec(f"{PREFIX}.joints.{{joint}}.axis", "int",
+                      "Axis of a multi-axis device that drives {joint} (its profile objects "
+                      "at index + 0x800 x axis); joints on one node use different axes.",
+                      default=0, minimum=0, maximum=MAX_AXES - 1),
         )
         return bus_specs(PREFIX) + [
             ParamSpec(f"{PREFIX}.mode", "string",
                       "Mode of operation: csv (cyclic synchronous velocity, 0x6060 = 9) or "
-                      "pv (profile velocity, 3).", default="csv", choices=tuple(_MODES)),
+                      "pv (profile velocity, 3); must be in each drive's 0x6502.",
+                      default="csv", choices=tuple(_MODES)),
+            ParamSpec(f"{PREFIX}.eds", "string",
+                      "EDS or DCF file of the drives (path) for joints without their own; "
+                      "empty: a generic CiA 402 drive (32-bit velocities, 4 PDOs each way, "
+                      "heartbeat consumer).", default=""),
             ParamSpec(f"{PREFIX}.master_node_id", "int",
                       "Node id of this controller's heartbeat (0x700 + id); no drive may "
                       "use it.", default=127, minimum=1, maximum=127),
             ParamSpec(f"{PREFIX}.heartbeat_period", "double",
-                      "Heartbeat period set in each drive (0x1017) and of the master [s].",
+                      "Heartbeat period set in each drive (0x1017) and of the master; guard "
+                      "time (0x100C) on drives watched by node guarding [s].",
                       default=0.05, minimum=0.001, maximum=60.0),
             ParamSpec(f"{PREFIX}.heartbeat_timeout", "double",
-                      "A drive whose heartbeat is older than this is lost: fault and stop [s].",
-                      default=0.2, minimum=0.002, maximum=60.0),
+                      "A drive whose heartbeat (or guarding answer) is older than this is "
+                      "lost: fault and stop [s].", default=0.2, minimum=0.002, maximum=60.0),
             ParamSpec(f"{PREFIX}.feedback_timeout", "double",
                       "PDOs older than this are late (the drive stopped answering SYNC): "
                       "fault and stop [s].", default=0.05, minimum=0.002, maximum=10.0),
             ParamSpec(f"{PREFIX}.drive_watchdog", "double",
-                      "Heartbeat consumer time set in each drive (0x1016) on this master's "
-                      "heartbeat: the drives fault by themselves when the controller stops "
-                      "[s]; 0 leaves 0x1016 alone.", default=0.25, minimum=0.0, maximum=60.0),
+                      "Time after which each drive faults by itself when this controller "
+                      "stops [s]: heartbeat consumer 0x1016 on this master's heartbeat, or on "
+                      "drives without it node guarding (life time 0x100C x 0x100D); 0 "
+                      "leaves both alone.", default=0.25, minimum=0.0, maximum=60.0),
             ParamSpec(f"{PREFIX}.startup_timeout", "double",
                       "How long configure waits for the first PDOs and arming for each "
                       "state transition [s].", default=2.0, minimum=0.05, maximum=60.0),
@@ -204,15 +427,15 @@ class Cia402Driver(CanDriver):
         network.connect()
         self._network = network
         try:
-            self._nodes = []
-            for node_id in self.joints.node_ids:
-                node = canopen.RemoteNode(node_id, canopen.ObjectDictionary())
+            self._nodes = {}
+            for node_id, joints in self._node_joints.items():
+                node = canopen.RemoteNode(node_id, self._objects[joints[0]].od)
                 network.add_node(node)
                 node.sdo.RESPONSE_TIMEOUT = self._sdo_timeout
-                self._nodes.append(node)
-            for i, node in enumerate(self._nodes):
-                self._configure_drive(i, node)
-            for node in self._nodes:
+                self._nodes[node_id] = node
+            for node_id, joints in self._node_joints.items():
+                self._configure_device(node_id, joints)
+            for node in self._nodes.values():
                 node.nmt.send_command(co.NmtCommand.START)
             self._wait("first PDOs and heartbeats",
                        lambda: self._first_not_ready(enabled=False))
@@ -223,8 +446,28 @@ class Cia402Driver(CanDriver):
             self._disconnect()
             raise
 
-    def _configure_drive(self, i: int, node) -> None:
-        device = self.devices[i]
+    def _download(self, i: int, index: int, sub: int, data: bytes) -> None:
+        """One SDO write to joint ``i``'s device; a refusal names object and value."""
+        try:
+            self._nodes[self.joints.node_ids[i]].sdo.download(index, sub, data)
+        except canopen.SdoAbortedError as exc:
+            raise DriverFault(f"refused 0x{index:04X}:{sub} = {data.hex()} ({exc})",
+                              self.devices[i]) from exc
+
+    def _upload(self, i: int, index: int, sub: int = 0):
+        """Joint ``i``'s axis object (profile index) read by SDO, decoded by its type."""
+        objects = self._objects[i]
+        data = self._nodes[self.joints.node_ids[i]].sdo.upload(objects.index(index), sub)
+        return objects.decode(index, sub, data)
+
+    def _write(self, i: int, index: int, value, sub: int = 0) -> None:
+        """Joint ``i``'s axis object (profile index) written by SDO in its own type."""
+        objects = self._objects[i]
+        self._download(i, objects.index(index), sub, objects.encode(index, sub, value))
+
+    def _configure_device(self, node_id: int, joints: list[int]) -> None:
+        first = joints[0]
+        device, objects, node = self.devices[first], self._objects[first], self._nodes[node_id]
         node.nmt.send_command(co.NmtCommand.ENTER_PRE_OPERATIONAL)
         try:
             (device_type,) = struct.unpack("<I", node.sdo.upload(co.DEVICE_TYPE, 0)[:4])
@@ -234,37 +477,105 @@ class Cia402Driver(CanDriver):
                 "and bit rate?", device) from exc
         if device_type & 0xFFFF != co.PROFILE_402:
             raise DriverFault(f"device type 0x{device_type:08X} is not a CiA 402 drive", device)
-        writes = [(co.PRODUCER_HEARTBEAT_TIME, 0,
-                   struct.pack("<H", max(1, round(self._heartbeat_period * 1e3))))]
-        if self._watchdog > 0:
-            writes.append((co.CONSUMER_HEARTBEAT_TIME, 1, struct.pack(
-                "<I", (self._master_id << 16) | max(1, round(self._watchdog * 1e3)))))
-        writes.append((co.MODES_OF_OPERATION, 0, struct.pack("<b", int(self._mode))))
-        writes.append((co.TARGET_VELOCITY, 0, struct.pack("<i", 0)))
-        writes += pdo_configuration(node.id)
-        for index, sub, data in writes:
-            try:
-                node.sdo.download(index, sub, data)
-            except canopen.SdoAbortedError as exc:
-                raise DriverFault(f"refused 0x{index:04X}:{sub} = {data.hex()} ({exc})",
-                                  device) from exc
-        (mode,) = struct.unpack("<b", node.sdo.upload(co.MODES_DISPLAY, 0)[:1])
+        kind = self._watchdog_plan(objects)
+        self._watchdog_kind[node_id] = kind
+        period_ms = max(1, round(self._heartbeat_period * 1e3))
+        if kind == "guarding":
+            # CiA 301: a heartbeat producer time != 0 disables node guarding
+            if objects.has(co.PRODUCER_HEARTBEAT_TIME):
+                self._write(first, co.PRODUCER_HEARTBEAT_TIME, 0)
+            factor = min(255, max(1, math.ceil(self._watchdog / self._heartbeat_period)))
+            self._write(first, co.GUARD_TIME, min(period_ms, 0xFFFF))
+            self._write(first, co.LIFE_TIME_FACTOR, factor)
+        else:
+            self._write(first, co.PRODUCER_HEARTBEAT_TIME, period_ms)
+            if kind == "heartbeat":
+                self._write(first, co.CONSUMER_HEARTBEAT_TIME, (self._master_id << 16)
+                            | min(0xFFFF, max(1, round(self._watchdog * 1e3))), sub=1)
+            elif self._watchdog > 0:
+                self._warn(first, "has neither a heartbeat consumer (0x1016) nor node "
+                           "guarding (0x100C/0x100D): it will NOT stop by itself if this "
+                           "controller dies or hangs")
+        for i in joints:
+            self._write(i, co.MODES_OF_OPERATION, int(self._mode))
+            self._write(i, co.TARGET_VELOCITY, 0)
+        for index, sub, data in self._plans[node_id].writes():
+            self._download(first, index, sub, data)
+        for i in joints:
+            self._check_axis(i)
+
+    def _watchdog_plan(self, objects: AxisObjects) -> str:
+        if self._watchdog <= 0:
+            return "none"
+        if objects.has(co.CONSUMER_HEARTBEAT_TIME, 1):
+            return "heartbeat"
+        if objects.has(co.GUARD_TIME) and objects.has(co.LIFE_TIME_FACTOR):
+            return "guarding"
+        return "none"
+
+    def _warn(self, i: int, message: str) -> None:
+        text = f"{self.devices[i]}: {message}"
+        self.warnings.append(text)
+        _log.warning(text)
+
+    def _check_axis(self, i: int) -> None:
+        """After the set-up: the mode took, it is in 0x6502, torque scaling,
+        the velocity unit."""
+        device, objects = self.devices[i], self._objects[i]
+        mode = self._upload(i, co.MODES_DISPLAY)
+        supported = self._upload(i, co.SUPPORTED_MODES) if objects.has(co.SUPPORTED_MODES) \
+            else None
+        name = self.params[f"{PREFIX}.mode"]
+        if supported is not None and not supported & mode_bit(self._mode):
+            raise DriverFault(f"does not offer mode {name} (0x6502 offers: "
+                              f"{mode_names(supported)})", device)
         if mode != int(self._mode):
-            raise DriverFault(f"did not take mode {self._mode.name} (0x6061 reads {mode})",
-                              device)
+            raise DriverFault(f"did not take mode {name} (0x6061 reads {mode})", device)
         # torque mode needs CST in 0x6502 and a rated torque to scale 0x6071
-        (supported,) = struct.unpack("<I", node.sdo.upload(co.SUPPORTED_MODES, 0)[:4])
-        try:
-            (rated,) = struct.unpack("<I", node.sdo.upload(co.MOTOR_RATED_TORQUE, 0)[:4])
-        except canopen.SdoAbortedError:
-            rated = 0                       # no 0x6076: no torque mode
-        cst = supported & (1 << (co.OpMode.CYCLIC_SYNCHRONOUS_TORQUE - 1))
-        self._rated_torque[i] = rated * 1e-3 if cst else 0.0
+        rated = 0
+        if objects.has(co.MOTOR_RATED_TORQUE):
+            try:
+                rated = self._upload(i, co.MOTOR_RATED_TORQUE)
+            except canopen.SdoAbortedError:
+                rated = 0                   # no 0x6076: no torque mode
+        cst = supported is not None and supported & mode_bit(OpMode.CYCLIC_SYNCHRONOUS_TORQUE)
+        torque_pdo = self._wiring[i].rx_torque is not None
+        self._rated_torque[i] = rated * 1e-3 if cst and torque_pdo else 0.0
+        if objects.has(co.SI_UNIT_VELOCITY):
+            self._check_velocity_unit(i)
+
+    def _check_velocity_unit(self, i: int) -> None:
+        """0x60A9 (and the gear ratio 0x6091 it applies after) against the
+        configured velocity units per motor rev/s."""
+        joint = self.joints.joint_names[i]
+        unit = self._upload(i, co.SI_UNIT_VELOCITY)
+        if unit not in SI_VELOCITY_UNITS:
+            self._warn(i, f"velocity unit 0x60A9 = 0x{unit:08X} is not one the driver knows "
+                       f"(counts/s, rev/s, rpm, 0.1 rpm, 0.001 rpm): check "
+                       f"{PREFIX}.joints.{joint}.velocity_resolution by hand")
+            return
+        name, per_rev = SI_VELOCITY_UNITS[unit]
+        per_rev_s = self._counts_per_rev[i] if per_rev is None else per_rev
+        gear = ""
+        objects = self._objects[i]
+        if objects.has(co.GEAR_RATIO, 1) and objects.has(co.GEAR_RATIO, 2):
+            motor_revs = self._upload(i, co.GEAR_RATIO, 1)
+            shaft_revs = self._upload(i, co.GEAR_RATIO, 2)
+            if motor_revs and shaft_revs and motor_revs != shaft_revs:
+                # the drive's velocity is of the shaft after its gear
+                per_rev_s = per_rev_s * shaft_revs / motor_revs
+                gear = f" after its gear 0x6091 = {motor_revs}:{shaft_revs}"
+        configured = self._vel_units_per_rev_s[i]
+        if not math.isclose(configured, per_rev_s, rel_tol=1e-6):
+            raise DriverFault(
+                f"velocity unit 0x60A9 = 0x{unit:08X} ({name}{gear}) means {per_rev_s:g} "
+                f"units per motor rev/s, but {PREFIX}.joints.{joint}.velocity_resolution "
+                f"gives {configured:g}", self.devices[i])
 
     def _on_activate(self) -> None:
         try:
-            for i, node in enumerate(self._nodes):
-                self._enable_drive(i, node)
+            for i in range(len(self.devices)):
+                self._enable_drive(i)
                 # keep SYNC and the master heartbeat going (drive watchdogs)
                 self._cycle_frames(time.monotonic())
             # the first read after arming must find fresh PDOs from enabled drives
@@ -277,30 +588,31 @@ class Cia402Driver(CanDriver):
             self._stop_all()
             raise
 
-    def _enable_drive(self, i: int, node) -> None:
+    def _enable_drive(self, i: int) -> None:
         device = self.devices[i]
-        state = self._sdo_state(node)
+        state = self._sdo_state(i)
         if state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
             # fault reset acts on the rising edge of bit 7
-            self._controlword(node, Control.DISABLE_VOLTAGE)
-            self._controlword(node, Control.FAULT_RESET)
-            state = self._sdo_state(node)
+            self._write(i, co.CONTROLWORD, Control.DISABLE_VOLTAGE)
+            self._write(i, co.CONTROLWORD, Control.FAULT_RESET)
+            state = self._sdo_state(i)
             if state is State.FAULT:
-                (code,) = struct.unpack("<H", node.sdo.upload(co.ERROR_CODE, 0)[:2])
+                code = (self._upload(i, co.ERROR_CODE) if self._objects[i].has(co.ERROR_CODE)
+                        else self._drives[i].emcy_code)
                 raise DriverFault(f"fault persists after fault reset (error code 0x{code:04X})",
                                   device)
-        node.sdo.download(co.TARGET_VELOCITY, 0, struct.pack("<i", 0))
+        self._write(i, co.TARGET_VELOCITY, 0)
         if self._in_torque[i]:
             # every arming starts in the configured velocity mode, target 0
-            node.sdo.download(co.TARGET_TORQUE, 0, struct.pack("<h", 0))
-            node.sdo.download(co.MODES_OF_OPERATION, 0, struct.pack("<b", int(self._mode)))
+            self._write(i, co.TARGET_TORQUE, 0)
+            self._write(i, co.MODES_OF_OPERATION, int(self._mode))
             self._in_torque[i] = False
         for command, expected in ((Control.SHUTDOWN, State.READY_TO_SWITCH_ON),
                                   (Control.SWITCH_ON, State.SWITCHED_ON),
                                   (Control.ENABLE_OPERATION, State.OPERATION_ENABLED)):
-            self._controlword(node, command)
+            self._write(i, co.CONTROLWORD, command)
             deadline = time.monotonic() + self._startup_timeout
-            while (state := self._sdo_state(node)) is not expected:
+            while (state := self._sdo_state(i)) is not expected:
                 if time.monotonic() > deadline:
                     raise DriverFault(f"did not reach {expected.value} after controlword "
                                       f"0x{int(command):04X} (state {state.value})", device)
@@ -311,7 +623,7 @@ class Cia402Driver(CanDriver):
 
     def _on_close(self) -> None:
         if self._network is not None:
-            for node in self._nodes:
+            for node in self._nodes.values():
                 try:
                     node.nmt.send_command(co.NmtCommand.ENTER_PRE_OPERATIONAL)
                 except Exception:  # noqa: BLE001 (bus already gone: nothing to tell)
@@ -366,33 +678,45 @@ class Cia402Driver(CanDriver):
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
         motor = self.joints.to_motor_velocities(np.asarray(velocities, float))
-        units = np.clip(np.rint(motor * self._vel_units_per_rev_s), -_INT32, _INT32)
-        for i, (node, value) in enumerate(zip(self.joints.node_ids, units)):
+        units = np.rint(motor * self._vel_units_per_rev_s)
+        for i, value in enumerate(units):
             if self._in_torque[i]:
-                # back to the velocity mode: one SDO (RPDO1 does not carry it)
+                # back to the velocity mode: one SDO (the velocity RPDO does not carry it)
                 try:
-                    self._nodes[i].sdo.download(co.MODES_OF_OPERATION, 0,
-                                                struct.pack("<b", int(self._mode)))
-                except (canopen.SdoCommunicationError, canopen.SdoAbortedError) as exc:
+                    self._write(i, co.MODES_OF_OPERATION, int(self._mode))
+                except (canopen.SdoCommunicationError, canopen.SdoAbortedError,
+                        DriverFault) as exc:
                     raise DriverCommunicationError(f"mode switch failed: {exc}",
                                                    self.devices[i]) from exc
                 self._in_torque[i] = False
-            self._send(co.RPDO[0] + node,
-                       struct.pack("<Hi", Control.ENABLE_OPERATION, int(value)))
+            self._send_velocity(i, Control.ENABLE_OPERATION, value)
+
+    def _send_velocity(self, i: int, word: int, value: float) -> None:
+        """The velocity RPDO: controlword + target velocity, each in the size
+        the drive's dictionary gives it (a 16-bit target saturates)."""
+        w = self._wiring[i]
+        self._send(w.rx_velocity, w.objects.encode(co.CONTROLWORD, 0, int(word))
+                   + w.objects.encode(co.TARGET_VELOCITY, 0, value))
+
+    def _send_torque(self, i: int, word: int, per_mille: int) -> None:
+        w = self._wiring[i]
+        self._send(w.rx_torque, w.objects.encode(co.CONTROLWORD, 0, int(word))
+                   + w.objects.encode(co.TARGET_TORQUE, 0, per_mille)
+                   + w.objects.encode(co.MODES_OF_OPERATION, 0,
+                                      OpMode.CYCLIC_SYNCHRONOUS_TORQUE))
 
     def _on_write_efforts(self, efforts: np.ndarray) -> None:
         """Joint torques [N m] -> motor torques (gear, direction) -> 0x6071 in
         per mille of each drive's rated torque, with 0x6060 = cyclic
-        synchronous torque, in RPDO2."""
+        synchronous torque, in the torque RPDO."""
         motor = self.joints.to_motor_torques(np.asarray(efforts, float))
-        for i, (node, value) in enumerate(zip(self.joints.node_ids, motor)):
+        for i, value in enumerate(motor):
             rated = self._rated_torque[i]
             if rated <= 0.0:
                 raise DriverFault("has no cyclic synchronous torque mode (0x6502) or no "
                                   "rated torque (0x6076)", self.devices[i])
             units = int(np.clip(round(1000.0 * value / rated), -32767, 32767))
-            self._send(co.RPDO[1] + node, struct.pack(
-                "<Hhb", Control.ENABLE_OPERATION, units, co.OpMode.CYCLIC_SYNCHRONOUS_TORQUE))
+            self._send_torque(i, Control.ENABLE_OPERATION, units)
             self._in_torque[i] = True
 
     def status(self) -> dict[str, str]:
@@ -400,25 +724,34 @@ class Cia402Driver(CanDriver):
         now = time.monotonic()
         with self._lock:
             for i, d in enumerate(self._drives):
+                node = self.joints.node_ids[i]
                 out[self.joints.joint_names[i]] = (
-                    f"node {self.joints.node_ids[i]}: NMT {_nmt_name(d.nmt_state)}, "
-                    f"{co.state_of(d.statusword).value}, error code 0x{d.error_code:04X}, "
-                    f"heartbeat {(now - d.heartbeat_time) * 1e3:.0f} ms ago")
+                    f"node {node}: NMT {_nmt_name(d.nmt_state)}, "
+                    f"{co.state_of(d.statusword).value}, error code "
+                    f"0x{d.error_code or d.emcy_code:04X}, heartbeat "
+                    f"{(now - d.heartbeat_time) * 1e3:.0f} ms ago, watchdog "
+                    f"{self._watchdog_kind.get(node, 'not set up')}")
+        for k, text in enumerate(self.warnings):
+            out[f"warning {k + 1}"] = text
         return out
 
     # -- bus ---------------------------------------------------------------------------------
     def _cycle_frames(self, now: float) -> None:
-        """SYNC every cycle (the drives sample and answer), master heartbeat when due."""
+        """SYNC every cycle (the drives sample and answer); the master
+        heartbeat and the node guarding requests when due."""
         self._sync_time = now
         if now >= self._next_master_heartbeat:
             self._next_master_heartbeat = now + self._heartbeat_period
             self._send(co.HEARTBEAT + self._master_id, bytes([co.NmtState.OPERATIONAL]))
+            for node, kind in self._watchdog_kind.items():
+                if kind == "guarding":
+                    self._send(co.HEARTBEAT + node, b"", remote=True)
         self._send(co.SYNC, b"")
         self.counters["syncs"] += 1
 
-    def _send(self, cob_id: int, data: bytes) -> None:
+    def _send(self, cob_id: int, data: bytes, remote: bool = False) -> None:
         try:
-            self._network.send_message(cob_id, data)
+            self._network.send_message(cob_id, data, remote=remote)
         except (can.CanError, RuntimeError) as exc:
             raise DriverCommunicationError(f"send of 0x{cob_id:03X} failed: {exc}",
                                            PREFIX) from exc
@@ -427,12 +760,11 @@ class Cia402Driver(CanDriver):
     def _stop_all(self) -> None:
         """Disable operation with zero targets on every drive, then SYNC now."""
         failure = None
-        for i, node in enumerate(self.joints.node_ids):
+        for i in range(len(self.devices)):
             try:
                 if self._in_torque[i]:
-                    self._send(co.RPDO[1] + node, struct.pack(
-                        "<Hhb", Control.SWITCH_ON, 0, co.OpMode.CYCLIC_SYNCHRONOUS_TORQUE))
-                self._send(co.RPDO[0] + node, struct.pack("<Hi", Control.SWITCH_ON, 0))
+                    self._send_torque(i, Control.SWITCH_ON, 0)
+                self._send_velocity(i, Control.SWITCH_ON, 0)
             except DriverCommunicationError as exc:
                 failure = failure or exc
         try:
@@ -442,12 +774,8 @@ class Cia402Driver(CanDriver):
         if failure is not None:
             raise failure
 
-    def _controlword(self, node, command: int) -> None:
-        node.sdo.download(co.CONTROLWORD, 0, struct.pack("<H", int(command)))
-
-    def _sdo_state(self, node) -> State:
-        (word,) = struct.unpack("<H", node.sdo.upload(co.STATUSWORD, 0)[:2])
-        return co.state_of(word)
+    def _sdo_state(self, i: int) -> State:
+        return co.state_of(self._upload(i, co.STATUSWORD))
 
     def _wait(self, what: str, ready: Callable[[], int | None]) -> None:
         """Send SYNC + heartbeat each 5 ms until ``ready()`` is None (it returns
@@ -479,40 +807,55 @@ class Cia402Driver(CanDriver):
 
     # -- receive (canopen's notifier thread) ---------------------------------------------------
     def on_frame(self, cob_id: int, data: bytes) -> None:
-        entry = self._cob.get(cob_id)
-        if entry is None:
+        entries = self._cob.get(cob_id)
+        if entries is None:
             return
-        i, handler = entry
+        now = time.monotonic()
         try:
             with self._lock:
-                handler(self._drives[i], bytes(data), time.monotonic())
-        except (struct.error, ValueError):
+                for i, handler in entries:
+                    handler(i, bytes(data), now)
+        except (struct.error, ValueError, KeyError):
             self.counters["bad_frames"] += 1
 
-    def _on_tpdo1(self, d: _Drive, data: bytes, now: float) -> None:
-        if len(data) != 8:
-            raise ValueError("TPDO1 length")
-        d.position, d.velocity = struct.unpack("<ii", data)
+    def _decode(self, i: int, entries, data: bytes) -> list[int]:
+        """Values of a TPDO laid out as ``entries``; ValueError if its length differs."""
+        if len(data) != sum(bits // 8 for _, _, bits in entries):
+            raise ValueError("PDO length")
+        od, values, offset = self._objects[i].od, [], 0
+        for index, sub, bits in entries:
+            n = bits // 8
+            values.append(od.get_variable(index, sub).decode_raw(data[offset:offset + n]))
+            offset += n
+        return values
+
+    def _on_feedback(self, i: int, data: bytes, now: float) -> None:
+        d = self._drives[i]
+        d.position, d.velocity = self._decode(i, self._wiring[i].feedback, data)
         d.feedback_time = now
         # the drive sampled these at the SYNC they answer: the last one sent
         d.sample_time = self._sync_time
 
-    def _on_tpdo2(self, d: _Drive, data: bytes, now: float) -> None:
-        if len(data) != 4:
-            raise ValueError("TPDO2 length")
-        d.statusword, d.error_code = struct.unpack("<HH", data)
+    def _on_status(self, i: int, data: bytes, now: float) -> None:
+        d = self._drives[i]
+        values = self._decode(i, self._wiring[i].status, data)
+        d.statusword = values[0]
+        if len(values) > 1:
+            d.error_code = values[1]
         d.status_time = now
 
-    def _on_heartbeat(self, d: _Drive, data: bytes, now: float) -> None:
+    def _on_heartbeat(self, i: int, data: bytes, now: float) -> None:
         if len(data) != 1:
             raise ValueError("heartbeat length")
+        d = self._drives[i]
+        # the toggle bit 7 of a node guarding answer is not part of the state
         d.nmt_state = data[0] & 0x7F
         d.heartbeat_time = now
 
-    def _on_emcy(self, d: _Drive, data: bytes, now: float) -> None:
+    def _on_emcy(self, i: int, data: bytes, now: float) -> None:
         if len(data) != 8:
             raise ValueError("EMCY length")
-        (d.emcy_code,) = struct.unpack_from("<H", data)
+        (self._drives[i].emcy_code,) = struct.unpack_from("<H", data)
         self.counters["emcy"] += 1
 
 
