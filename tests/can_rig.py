@@ -52,10 +52,17 @@ class CanRig:
         if backend == "odrive_can":
             self.devices = [EmulatedOdriveAxis(n, self.channel) for n in self.node_ids]
         else:
-            res = [int(self.config.values[f"cia402.joints.{j}.encoder_resolution"])
-                   for j in self.model.joint_names]
-            self.devices = [EmulatedCia402Drive(n, self.channel, encoder_resolution=r)
-                            for n, r in zip(self.node_ids, res)]
+            # one emulated device per node, built from the joint's EDS (the
+            # generic drive without one); its velocity unit is what the
+            # file's 0x60A9 says, independent of the driver's parameters
+            v = self.config.values
+            self.devices = []
+            for n in dict.fromkeys(self.node_ids):
+                j = self.model.joint_names[self.node_ids.index(n)]
+                eds = v[f"cia402.joints.{j}.eds"] or v["cia402.eds"] or None
+                self.devices.append(EmulatedCia402Drive(
+                    n, self.channel, eds,
+                    encoder_resolution=int(v[f"cia402.joints.{j}.encoder_resolution"])))
         self.sniffer = can.Bus(interface="virtual", channel=self.channel)
         self.frames: list[can.Message] = []
         self.emulators = EmulatorThread(self.devices).start()

@@ -817,6 +817,9 @@ class Cia402Driver(CanDriver):
                     handler(i, bytes(data), now)
         except (struct.error, ValueError, KeyError):
             self.counters["bad_frames"] += 1
+            return
+        if co.EMCY < cob_id <= co.EMCY + 127:
+            self.counters["emcy"] += 1          # once per frame, whatever the axes
 
     def _decode(self, i: int, entries, data: bytes) -> list[int]:
         """Values of a TPDO laid out as ``entries``; ValueError if its length differs."""
@@ -856,7 +859,6 @@ class Cia402Driver(CanDriver):
         if len(data) != 8:
             raise ValueError("EMCY length")
         (self._drives[i].emcy_code,) = struct.unpack_from("<H", data)
-        self.counters["emcy"] += 1
 
 
 class _FrameListener(can.Listener):

@@ -206,7 +206,7 @@ def _record(index: int, name: str, members) -> ODRecord:
 def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
                        supported_modes: int = (mode_bit(3) | mode_bit(9) | mode_bit(10)),
                        target_velocity_type: int = dt.INTEGER32,
-                       torque: bool = True, error_code_mappable: bool = True,
+                       torque: bool = True, error_code: str = "pdo",
                        watchdog: str = "heartbeat", velocity_unit: int | None = None,
                        pdos: int = 4, rated_torque_mnm: int = 1000,
                        rtr_not_allowed: bool = False) -> ObjectDictionary:
@@ -217,7 +217,8 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
     0x603F mappable; heartbeat consumer 0x1016; four RPDOs and TPDOs).
     The keywords change one feature each -- ``axes`` (profile objects at
     +0x800 per axis), ``target_velocity_type`` (a canopen data type, e.g.
-    INTEGER16), ``torque`` (0x6071/0x6076 present), ``error_code_mappable``,
+    INTEGER16), ``torque`` (0x6071/0x6076 present), ``error_code`` ("pdo": 0x603F
+    mappable, "sdo": not mappable, "none": no 0x603F),
     ``watchdog`` ("heartbeat": 0x1016, "guarding": 0x100C/0x100D only,
     "none"), ``velocity_unit`` (0x60A9 value, None: no 0x60A9), ``pdos``,
     ``rtr_not_allowed`` (bit 30 in the TPDO COB-IDs) -- which is how the
@@ -265,7 +266,9 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
                 _var(mapping + k, s, f"Mapped object {s}", u32, "rw", 0) for s in range(1, 9)]))
     for axis in range(axes):
         o = AXIS_OFFSET * axis
-        add(_var(co.ERROR_CODE + o, 0, "Error code", u16, "ro", 0, mappable=error_code_mappable))
+        if error_code != "none":
+            add(_var(co.ERROR_CODE + o, 0, "Error code", u16, "ro", 0,
+                     mappable=error_code == "pdo"))
         add(_var(co.CONTROLWORD + o, 0, "Controlword", u16, "rww", 0, mappable=True))
         add(_var(co.STATUSWORD + o, 0, "Statusword", u16, "ro", 0, mappable=True))
         add(_var(co.QUICK_STOP_OPTION + o, 0, "Quick stop option code", dt.INTEGER16, "rw", 2))
