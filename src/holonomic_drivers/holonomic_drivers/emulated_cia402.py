@@ -46,7 +46,8 @@ from typing import Protocol, Sequence
 
 import can
 import canopen
-from canopen.objectdictionary import ObjectDictionary
+from canopen.objectdictionary import ODVariable, ObjectDictionary
+from canopen.objectdictionary.datatypes import FLOAT_TYPES, NUMBER_TYPES
 from canopen.sdo import SdoAbortedError
 
 from holonomic_drivers import cia402_protocol as co
@@ -293,6 +294,14 @@ class EmulatedCia402Drive:
         """Power-on values: the file's defaults, and each axis SWITCH ON DISABLED."""
         self.node.data_store.clear()
         self._pending.clear()
+        # objects the file gives no default have a value in a real drive all the same
+        for var in _variables(self.node.object_dictionary):
+            if var.default is None and var.value is None and var.data_type in NUMBER_TYPES:
+                zero = 0.0 if var.data_type in FLOAT_TYPES else 0
+                zero = max(zero, var.min) if var.min is not None else zero   # within its limits
+                zero = min(zero, var.max) if var.max is not None else zero
+                self.node.data_store.setdefault(var.index, {})[var.subindex] = \
+                    var.encode_raw(zero)
         for axis in self.axes:
             axis.state, axis.controlword = State.SWITCH_ON_DISABLED, 0
             self._put(axis.objects, co.STATUSWORD, co.statusword_of(axis.state))
@@ -528,6 +537,14 @@ class EmulatedCia402Drive:
         if self._heartbeat_period > 0 and now >= self._next_heartbeat:
             self._next_heartbeat = now + self._heartbeat_period
             self.network.send_message(co.HEARTBEAT + self.node_id, bytes([self.nmt]))
+
+
+def _variables(od: ObjectDictionary):
+    for obj in od.values():
+        if isinstance(obj, ODVariable):
+            yield obj
+        else:
+            yield from obj.values()
 
 
 def _int32(value: int) -> int:
