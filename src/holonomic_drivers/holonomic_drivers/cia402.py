@@ -488,6 +488,10 @@ class Cia402Driver(CanDriver):
             self._write(first, co.GUARD_TIME, min(period_ms, 0xFFFF))
             self._write(first, co.LIFE_TIME_FACTOR, factor)
         else:
+            if not objects.has(co.PRODUCER_HEARTBEAT_TIME):
+                raise DriverFault("has neither a heartbeat producer (0x1017) nor node guarding "
+                                  "(0x100C/0x100D): the driver cannot tell that it is alive",
+                                  device)
             self._write(first, co.PRODUCER_HEARTBEAT_TIME, period_ms)
             if kind == "heartbeat":
                 self._write(first, co.CONSUMER_HEARTBEAT_TIME, (self._master_id << 16)

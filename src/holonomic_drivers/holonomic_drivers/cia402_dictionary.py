@@ -138,7 +138,7 @@ class AxisObjects:
         (a 16-bit target velocity saturates rather than wraps)."""
         var = self._require(index, sub)
         if var.data_type in dt.INTEGER_TYPES:
-            low, high = _integer_range(var)
+            low, high = integer_range(var)
             value = int(min(max(int(value), low), high))
         return var.encode_raw(value)
 
@@ -177,7 +177,8 @@ class AxisObjects:
         return var
 
 
-def _integer_range(var: ODVariable) -> tuple[int, int]:
+def integer_range(var: ODVariable) -> tuple[int, int]:
+    """Smallest and largest value of an integer object."""
     bits = len(var)
     if var.data_type in dt.SIGNED_TYPES:
         return -(1 << (bits - 1)), (1 << (bits - 1)) - 1

@@ -53,7 +53,7 @@ from canopen.sdo import SdoAbortedError
 from holonomic_drivers import cia402_protocol as co
 from holonomic_drivers.cia402_dictionary import (AXIS_OFFSET, MAX_AXES, AxisObjects,
                                                  SI_VELOCITY_UNITS, generic_dictionary,
-                                                 mode_bit)
+                                                 integer_range, mode_bit)
 from holonomic_drivers.cia402_protocol import OpMode, State
 
 TWO_PI = 2.0 * math.pi
@@ -61,6 +61,9 @@ TWO_PI = 2.0 * math.pi
 ABORT_CANNOT_MAP = 0x06040041
 ABORT_PDO_TOO_LONG = 0x06040042
 ABORT_VALUE_RANGE = 0x06090030
+#: objects the drive writes itself (read-only to the master)
+_OWN_OBJECTS = frozenset((co.STATUSWORD, co.POSITION_ACTUAL, co.VELOCITY_ACTUAL,
+                          co.MODES_DISPLAY, co.ERROR_CODE, co.ERROR_REGISTER))
 
 
 class Motor(Protocol):
@@ -205,11 +208,17 @@ class EmulatedCia402Drive:
         self._guarding = _Guarding()
         self._syncs = 0
         self._pending: dict[tuple[int, int], bytes] = {}
+        #: (axis, index, sub) -> (variable, low, high) of the objects the drive reports
+        self._own: dict[tuple[int, int, int], tuple] = {}
         #: a write changed what the drive does: recompute it before the next step
         self._dirty = True
         self._heartbeat_period = 0.0
         self._consumer: tuple[int, float] | None = None     # (master COB-ID, limit [s])
         self._life_time = 0.0
+        #: valid RPDOs: COB-ID -> (transmission type, mapping); valid TPDOs:
+        #: (COB-ID, transmission type, mapping)
+        self._rpdos: dict[int, tuple[int, list[tuple[int, int, int]]]] = {}
+        self._tpdos: list[tuple[int, int, list[tuple[int, int, int]]]] = []
         self.node.add_write_callback(self._on_write)
         self._reset_values()
 
@@ -281,9 +290,18 @@ class EmulatedCia402Drive:
         return self.encoder_resolution
 
     def _put(self, objects: AxisObjects, index: int, value, sub: int = 0) -> None:
-        """Set an object of an axis from inside the drive (no access check)."""
-        if objects.has(index, sub):
-            self.node.set_data(objects.index(index), sub, objects.encode(index, sub, value))
+        """Set an object that the drive itself reports (statusword, actual
+        values, error code ...): stored directly, clipped to its type."""
+        key = (objects.axis, index, sub)
+        entry = self._own.get(key)
+        if entry is None:
+            var = objects.variable(index, sub)
+            if var is None:
+                return
+            entry = self._own[key] = (var, *integer_range(var))
+        var, low, high = entry
+        self.node.data_store.setdefault(var.index, {})[var.subindex] = \
+            var.encode_raw(min(max(int(value), low), high))
 
     def _value(self, objects: AxisObjects, index: int, default=0):
         if not objects.has(index):
@@ -316,10 +334,12 @@ class EmulatedCia402Drive:
     def _on_write(self, index: int, subindex: int, od, data: bytes, **_) -> None:
         """canopen's SDO server (and our RPDOs) write through here: the drive
         reacts, or refuses with an SDO abort code."""
-        self._dirty = True
         axis = self._axis_of(index)
+        base = index if axis is None else index - AXIS_OFFSET * axis.objects.axis
+        if base in _OWN_OBJECTS:
+            return              # what the drive itself reports changes nothing it does
+        self._dirty = True
         if axis is not None:
-            base = index - AXIS_OFFSET * axis.objects.axis
             value = od.decode_raw(data)
             if base == co.CONTROLWORD:
                 self._on_controlword(axis, value)
@@ -367,12 +387,10 @@ class EmulatedCia402Drive:
         elif cob == self._master_cob():
             self._master_heartbeat = now
         elif self.nmt == co.NmtState.OPERATIONAL:
-            for k in range(self._pdo_count(co.RPDO_COMM)):
-                if cob == self.get(co.RPDO_COMM + k, 1):      # valid: bit 31 clear
-                    self._on_rpdo(k, data)
-
-    def _pdo_count(self, comm_base: int) -> int:
-        return self.axes[0].objects.pdo_count(comm_base)
+            if self._dirty:
+                self._refresh()
+            if cob in self._rpdos:
+                self._on_rpdo(*self._rpdos[cob], data)
 
     def _master_cob(self) -> int | None:
         return None if self._consumer is None else self._consumer[0]
@@ -393,6 +411,17 @@ class EmulatedCia402Drive:
                 self._consumer = (co.HEARTBEAT + (entry >> 16 & 0x7F), (entry & 0xFFFF) * 1e-3)
         self._life_time = (self.get(co.GUARD_TIME) * self.get(co.LIFE_TIME_FACTOR) * 1e-3
                            if co.GUARD_TIME in od and co.LIFE_TIME_FACTOR in od else 0.0)
+        self._rpdos, self._tpdos = {}, []
+        for k in range(self.axes[0].objects.pdo_count(co.RPDO_COMM)):
+            cob = self.get(co.RPDO_COMM + k, 1)
+            if not cob & co.PDO_INVALID:
+                self._rpdos[cob & 0x1FFFFFFF] = (self.get(co.RPDO_COMM + k, 2),
+                                                 self._mapping(co.RPDO_MAP + k))
+        for k in range(self.axes[0].objects.pdo_count(co.TPDO_COMM)):
+            cob = self.get(co.TPDO_COMM + k, 1)
+            if not cob & co.PDO_INVALID:
+                self._tpdos.append((cob & 0x1FFFFFFF, self.get(co.TPDO_COMM + k, 2),
+                                    self._mapping(co.TPDO_MAP + k)))
 
     def _on_nmt(self, command: int) -> None:
         if command == co.NmtCommand.START:
@@ -423,15 +452,15 @@ class EmulatedCia402Drive:
         entries = [self.get(map_index, s) for s in range(1, self.get(map_index, 0) + 1)]
         return [(e >> 16, (e >> 8) & 0xFF, e & 0xFF) for e in entries]
 
-    def _on_rpdo(self, k: int, data: bytes) -> None:
+    def _on_rpdo(self, kind: int, entries, data: bytes) -> None:
         offset, values = 0, {}
-        for index, sub, bits in self._mapping(co.RPDO_MAP + k):
+        for index, sub, bits in entries:
             n = bits // 8
             if offset + n > len(data):
                 return          # a PDO shorter than its mapping is ignored
             values[(index, sub)] = data[offset:offset + n]
             offset += n
-        if self.get(co.RPDO_COMM + k, 2) <= 240:
+        if kind <= 240:
             self._pending.update(values)                    # applied at the next SYNC
         else:
             self._apply(values)
@@ -452,14 +481,13 @@ class EmulatedCia402Drive:
         if self._syncs % self.answer_every:
             return
         self._update_feedback()
-        for k in range(self._pdo_count(co.TPDO_COMM)):
-            cob = self.get(co.TPDO_COMM + k, 1)
-            kind = self.get(co.TPDO_COMM + k, 2)
-            if cob & co.PDO_INVALID or not 1 <= kind <= 240 or self._syncs % kind:
+        if self._dirty:
+            self._refresh()
+        for cob, kind, entries in self._tpdos:
+            if not 1 <= kind <= 240 or self._syncs % kind:
                 continue
-            payload = b"".join(self.node.get_data(i, s)
-                               for i, s, _ in self._mapping(co.TPDO_MAP + k))
-            self.network.send_message(cob & 0x1FFFFFFF, payload)
+            payload = b"".join(self.node.get_data(i, s) for i, s, _ in entries)
+            self.network.send_message(cob, payload)
 
     def _on_controlword(self, axis: _Axis, word: int) -> None:
         previous, axis.controlword = axis.controlword, word
