@@ -184,7 +184,8 @@ def test_velocity_only_drive_gets_no_torque_or_error_code_mapping(rig_factory):
 
 def test_pv_only_drive_refuses_csv_naming_the_modes_it_offers():
     """pv_only_guarding.eds: 0x6502 = pp | pv (bits 0 and 2)."""
-    config = load_config("hamr", {"driver": "cia402", "cia402.eds": str(DATA / "pv_only_guarding.eds")})
+    config = load_config("hamr", {"driver": "cia402",
+                                  "cia402.eds": str(DATA / "pv_only_guarding.eds")})
     with pytest.raises(ConfigError) as err:
         config.driver_class(config.model, config.values, 200.0)
     assert err.value.key == "cia402.mode"

@@ -339,6 +339,9 @@ class Cia402Driver(CanDriver):
             if not objects.has(co.CONTROLWORD):
                 axes = sum(1 for k in range(MAX_AXES)
                            if AxisObjects(objects.od, k).has(co.CONTROLWORD))
+                if axes == 0:
+                    raise ConfigError(key, path, "the EDS of a CiA 402 drive (it has no "
+                                      "controlword 0x6040)")
                 raise ConfigError(f"{PREFIX}.joints.{joint}.axis", axis,
                                   f"an axis of {path} (it has {axes}: 0..{axes - 1})")
             missing = [f"0x{objects.index(x):04X}" for x in _REQUIRED if not objects.has(x)]
@@ -377,8 +380,8 @@ class Cia402Driver(CanDriver):
                       "0.1 rpm); checked against the drive's 0x60A9 where it has one.",
                       default=0.0, minimum=0.0, maximum=1e12),
             ParamSpec(f"{PREFIX}.joints.{{joint}}.eds", "string",
-                      "EDS or DCF file of {joint}'s drive (path); empty: the bus-wide "
-                      "cia402.eds.", default=""),
+                      "EDS or DCF file of {joint}'s drive (absolute path, or relative to the "
+                      "working directory); empty: the bus-wide cia402.eds.", default=""),
             ParamSpec(f"{PREFIX}.joints.{{joint}}.axis", "int",
                       "Axis of a multi-axis device that drives {joint} (its profile objects "
                       "at index + 0x800 x axis); joints on one node use different axes.",
@@ -390,9 +393,10 @@ class Cia402Driver(CanDriver):
                       "pv (profile velocity, 3); must be in each drive's 0x6502.",
                       default="csv", choices=tuple(_MODES)),
             ParamSpec(f"{PREFIX}.eds", "string",
-                      "EDS or DCF file of the drives (path) for joints without their own; "
-                      "empty: a generic CiA 402 drive (32-bit velocities, 4 PDOs each way, "
-                      "heartbeat consumer).", default=""),
+                      "EDS or DCF file (absolute path, or relative to the working directory) "
+                      "of the drives of joints without their own; empty: a generic CiA 402 "
+                      "drive (32-bit velocities, 4 PDOs each way, heartbeat consumer).",
+                      default=""),
             ParamSpec(f"{PREFIX}.master_node_id", "int",
                       "Node id of this controller's heartbeat (0x700 + id); no drive may "
                       "use it.", default=127, minimum=1, maximum=127),
