@@ -175,10 +175,6 @@ class EmulatedCia402Drive:
             od = canopen.import_od(str(eds), node_id)
         self.node_id = node_id
         self.encoder_resolution = float(encoder_resolution)
-        self.bus = can.Bus(interface="virtual", channel=channel)
-        self.network = _DeviceNetwork(self.bus)
-        self.node = canopen.LocalNode(node_id, od)
-        self.network.add_node(self.node)
         count = sum(1 for k in range(MAX_AXES) if co.CONTROLWORD + AXIS_OFFSET * k in od)
         if count == 0:
             raise ValueError("the dictionary has no controlword 0x6040: not a CiA 402 drive")
@@ -190,6 +186,10 @@ class EmulatedCia402Drive:
             motors = [motor]
         if len(motors) != count:
             raise ValueError(f"{count} axes in the dictionary, {len(motors)} motors given")
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.network = _DeviceNetwork(self.bus)
+        self.node = canopen.LocalNode(node_id, od)
+        self.network.add_node(self.node)
         self.axes = [_Axis(AxisObjects(od, k), m) for k, m in enumerate(motors)]
         self.velocity_resolution = [self._velocity_resolution(a.objects, velocity_resolution)
                                     for a in self.axes]
