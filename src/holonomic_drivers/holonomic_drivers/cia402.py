@@ -116,8 +116,9 @@ class PdoPlan:
     tx_cob: dict[int, int]
     rx_count: int
     tx_count: int
-    invalid_rx: tuple[int, ...]
-    invalid_tx: tuple[int, ...]
+    #: the PDOs not used: number -> COB-ID written with bit 31 (invalid)
+    invalid_rx: dict[int, int]
+    invalid_tx: dict[int, int]
 
     def writes(self) -> list[tuple[int, int, bytes]]:
         """The SDO downloads ``(index, subindex, data)`` that set up the PDOs.
@@ -137,14 +138,9 @@ class PdoPlan:
                 writes += [(mapping + k, n + 1, u32(co.pdo_map_entry(*entry)))
                            for n, entry in enumerate(entries)]
                 writes += [(mapping + k, 0, u8(len(entries))), (comm + k, 1, u32(cob))]
-        for k in self.invalid_rx:
-            writes.append((co.RPDO_COMM + k, 1, u32(self._invalid_cob(co.RPDO, k))))
-        for k in self.invalid_tx:
-            writes.append((co.TPDO_COMM + k, 1, u32(self._invalid_cob(co.TPDO, k))))
+        for comm, invalid in ((co.RPDO_COMM, self.invalid_rx), (co.TPDO_COMM, self.invalid_tx)):
+            writes += [(comm + k, 1, u32(cob | co.PDO_INVALID)) for k, cob in invalid.items()]
         return writes
-
-    def _invalid_cob(self, base, k: int) -> int:
-        return (base[k] + self.node_id if k < 4 else 0) | co.PDO_INVALID
 
 
 def plan_pdos(node_id: int, axes: list[tuple[AxisObjects, bool]]) -> PdoPlan:
@@ -165,21 +161,26 @@ def plan_pdos(node_id: int, axes: list[tuple[AxisObjects, bool]]) -> PdoPlan:
         raise ValueError(f"needs {len(rx)} RPDOs and {len(tx)} TPDOs, the drive has "
                          f"{rx_count} and {tx_count}")
 
+    def ident(base, comm, k) -> int:
+        """11-bit identifier: the predefined connection set for PDOs 1..4, the
+        file's default beyond (0 if it has none)."""
+        return base[k] + node_id if k < 4 else device.cob_id_default(comm + k) or 0
+
     def cob(base, comm, k):
-        if k < 4:
-            ident = base[k] + node_id           # predefined connection set
-        else:
-            ident = device.cob_id_default(comm + k) or 0
-            if not ident:
-                raise ValueError(f"PDO {k + 1} has no default COB-ID in the file")
-        return ident | device.cob_id_flags(comm + k)
+        if not ident(base, comm, k):
+            raise ValueError(f"PDO {k + 1} has no default COB-ID in the file")
+        return ident(base, comm, k) | device.cob_id_flags(comm + k)
+
+    def unused(base, comm, count, used):
+        return {k: ident(base, comm, k) for k in range(count)
+                if k not in used and ident(base, comm, k)}
 
     return PdoPlan(node_id, rx, tx,
                    {k: cob(co.RPDO, co.RPDO_COMM, k) for k in rx},
                    {k: cob(co.TPDO, co.TPDO_COMM, k) for k in tx},
                    rx_count, tx_count,
-                   tuple(k for k in range(min(rx_count, 4)) if k not in rx),
-                   tuple(k for k in range(min(tx_count, 4)) if k not in tx))
+                   unused(co.RPDO, co.RPDO_COMM, rx_count, rx),
+                   unused(co.TPDO, co.TPDO_COMM, tx_count, tx))
 
 
 def _entries(objects: AxisObjects, layout) -> tuple[tuple[int, int, int], ...]:
