@@ -198,10 +198,17 @@ def test_node_guarding_drive_gets_guarding(rig_factory):
     hand: 0x1017 = 0 (a heartbeat would switch guarding off, CiA 301),
     guard time 0x100C = heartbeat_period = 50 ms, life time factor 0x100D =
     ceil(drive_watchdog 0.25 s / 0.05 s) = 5; mode 0x6060 = 3 (pv); the
-    TPDO COB-IDs keep the file's bit 30 (no RTR): 0x40000180 + 1."""
+    TPDO COB-IDs keep the file's bit 30 (no RTR): 0x40000180 + 1. Its RPDO1
+    and TPDO1 hold one mapping entry: controlword + target velocity go to
+    RPDO2 (RPDO1 invalid: 0x80000201), the status (0x6041 alone: 0x603F is
+    not mappable here) to TPDO1, position + velocity to TPDO2."""
     rig = rig_factory("pv_only_guarding.eds", **{"cia402.mode": "pv"})
     rig.driver.configure()
     last = final_values(sdo_writes(rig.sniff(), 1))
+    assert mapping(last, 0x1601) == [0x60400010, 0x60FF0020]
+    assert last[(0x1400, 1)] == 0x80000201 and last[(0x1401, 1)] == 0x301
+    assert mapping(last, 0x1A00) == [0x60410010]
+    assert mapping(last, 0x1A01) == [0x60640020, 0x606C0020]
     assert last[(0x1017, 0)] == 0 and last[(0x100C, 0)] == 50 and last[(0x100D, 0)] == 5
     assert (0x1016, 1) not in last
     assert last[(0x6060, 0)] == 3

@@ -146,20 +146,29 @@ class PdoPlan:
 def plan_pdos(node_id: int, axes: list[tuple[AxisObjects, bool]]) -> PdoPlan:
     """The PDO plan of one device whose axes are ``(objects, torque)`` in
     axis order: per axis the velocity RPDO (+ the torque RPDO if
-    ``torque``), the feedback TPDO and the status TPDO, numbered in that
-    order. Raises ValueError (one line) if the device has too few PDOs."""
+    ``torque``), the feedback TPDO and the status TPDO, each in the
+    lowest-numbered free PDO whose mapping record holds its entries (a drive
+    may declare fewer than eight mapping entries on some PDOs). Raises
+    ValueError (one line) if the device has too few PDOs."""
     device = axes[0][0]
     rx_count, tx_count = device.pdo_count(co.RPDO_COMM), device.pdo_count(co.TPDO_COMM)
     rx, tx = {}, {}
+
+    def place(pdos: dict, count: int, map_base: int, entries, what: str) -> None:
+        for k in range(count):
+            if k not in pdos and device.mapping_capacity(map_base + k) >= len(entries):
+                pdos[k] = entries
+                return
+        raise ValueError(f"no free PDO can hold the {what} ({len(entries)} objects; the drive "
+                         f"has {count} {'RPDOs' if map_base == co.RPDO_MAP else 'TPDOs'})")
+
     for objects, torque in axes:
-        rx[len(rx)] = _entries(objects, RX_VELOCITY)
+        axis = f"axis {objects.axis} " if len(axes) > 1 else ""
+        place(rx, rx_count, co.RPDO_MAP, _entries(objects, RX_VELOCITY), f"{axis}velocity")
         if torque:
-            rx[len(rx)] = _entries(objects, RX_TORQUE)
-        tx[len(tx)] = _entries(objects, TX_FEEDBACK)
-        tx[len(tx)] = _entries(objects, TX_STATUS)
-    if len(rx) > rx_count or len(tx) > tx_count:
-        raise ValueError(f"needs {len(rx)} RPDOs and {len(tx)} TPDOs, the drive has "
-                         f"{rx_count} and {tx_count}")
+            place(rx, rx_count, co.RPDO_MAP, _entries(objects, RX_TORQUE), f"{axis}torque")
+        place(tx, tx_count, co.TPDO_MAP, _entries(objects, TX_FEEDBACK), f"{axis}feedback")
+        place(tx, tx_count, co.TPDO_MAP, _entries(objects, TX_STATUS), f"{axis}status")
 
     def ident(base, comm, k) -> int:
         """11-bit identifier: the predefined connection set for PDOs 1..4, the
@@ -275,7 +284,8 @@ class Cia402Driver(CanDriver):
                 raise ConfigError(self._eds_key(joints[0]), self._objects[joints[0]].source,
                                   f"a drive with the PDOs its joints need ({exc})") from None
             self._plans[node] = plan
-            rx, tx = iter(sorted(plan.rx)), iter(sorted(plan.tx))
+            # dicts keep the order in which plan_pdos placed the PDOs
+            rx, tx = iter(plan.rx), iter(plan.tx)
             for i, torque in zip(joints, with_torque):
                 velocity = next(rx)
                 torque_pdo = next(rx) if torque else None

@@ -159,6 +159,15 @@ class AxisObjects:
             n += 1
         return n
 
+    def mapping_capacity(self, map_index: int) -> int:
+        """How many objects the PDO mapping record ``map_index`` (0x16xx or
+        0x1Axx) can hold: the mapping sub-indices the file declares (some
+        drives declare fewer than eight, e.g. one on their first PDO)."""
+        record = self.od.get(map_index)
+        if not isinstance(record, (ODRecord, ODArray)):
+            return 0
+        return sum(1 for sub in record if sub != 0)
+
     def cob_id_flags(self, comm_index: int) -> int:
         """Bits 29..30 of a PDO's COB-ID as the file sets them by default
         (bit 30: no RTR allowed on this PDO; bit 29: 29-bit identifier)."""
@@ -210,7 +219,8 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
                        torque: bool = True, error_code: str = "pdo",
                        watchdog: str = "heartbeat", velocity_unit: int | None = None,
                        pdos: int = 4, rated_torque_mnm: int = 1000,
-                       rtr_not_allowed: bool = False) -> ObjectDictionary:
+                       rtr_not_allowed: bool = False,
+                       first_pdo_entries: int = 8) -> ObjectDictionary:
     """A CiA 402 drive's object dictionary, built in code.
 
     Defaults: the drive that the ``cia402`` driver assumes without an EDS
@@ -222,7 +232,8 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
     mappable, "sdo": not mappable, "none": no 0x603F),
     ``watchdog`` ("heartbeat": 0x1016, "guarding": 0x100C/0x100D only,
     "none"), ``velocity_unit`` (0x60A9 value, None: no 0x60A9), ``pdos``,
-    ``rtr_not_allowed`` (bit 30 in the TPDO COB-IDs) -- which is how the
+    ``rtr_not_allowed`` (bit 30 in the TPDO COB-IDs), ``first_pdo_entries``
+    (mapping entries of RPDO1 and TPDO1; the others hold 8) -- which is how the
     tests' EDS files are written (``canopen.export_od``). ``node_id``:
     resolves $NODEID in the COB-ID defaults (None keeps them relative).
     """
@@ -262,9 +273,11 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
                 _var(comm + k, 0, "Highest sub-index supported", u8, "const", 2),
                 _var(comm + k, 1, "COB-ID", u32, "rw", default, default_raw=raw),
                 _var(comm + k, 2, "Transmission type", u8, "rw", 0xFF)]))
+            entries = first_pdo_entries if k == 0 else 8
             add(_record(mapping + k, f"{kind}{k + 1} mapping parameter", [
                 _var(mapping + k, 0, "Number of mapped objects", u8, "rw", 0)] + [
-                _var(mapping + k, s, f"Mapped object {s}", u32, "rw", 0) for s in range(1, 9)]))
+                _var(mapping + k, s, f"Mapped object {s}", u32, "rw", 0)
+                for s in range(1, entries + 1)]))
     for axis in range(axes):
         o = AXIS_OFFSET * axis
         if error_code != "none":

@@ -22,9 +22,11 @@ FILES = {
     # velocity only: no target torque 0x6071 / rated torque 0x6076, no error code 0x603F
     "velocity_only.eds": dict(torque=False, error_code="none",
                               supported_modes=mode_bit(3) | mode_bit(9)),
-    # profile velocity only; node guarding (0x100C/0x100D) instead of a heartbeat consumer
+    # profile velocity only; node guarding (0x100C/0x100D) instead of a heartbeat consumer;
+    # RPDO1 and TPDO1 hold one mapping entry only
     "pv_only_guarding.eds": dict(supported_modes=mode_bit(1) | mode_bit(3), torque=False,
-                                 watchdog="guarding", rtr_not_allowed=True),
+                                 watchdog="guarding", rtr_not_allowed=True,
+                                 error_code="sdo", first_pdo_entries=1),
     # 16-bit target and actual velocity in rpm (0x60A9), error code not mappable
     "int16_rpm.eds": dict(target_velocity_type=dt.INTEGER16, velocity_unit=RPM,
                           error_code="sdo"),
