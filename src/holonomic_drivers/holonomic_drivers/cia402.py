@@ -468,11 +468,19 @@ class Cia402Driver(CanDriver):
         except canopen.SdoAbortedError as exc:
             raise DriverFault(f"refused 0x{index:04X}:{sub} = {data.hex()} ({exc})",
                               self.devices[i]) from exc
+        except canopen.SdoCommunicationError as exc:
+            raise DriverCommunicationError(f"no answer to the SDO write of 0x{index:04X}:{sub} "
+                                           f"({exc})", self.devices[i]) from exc
 
     def _upload(self, i: int, index: int, sub: int = 0):
         """Joint ``i``'s axis object (profile index) read by SDO, decoded by its type."""
         objects = self._objects[i]
-        data = self._nodes[self.joints.node_ids[i]].sdo.upload(objects.index(index), sub)
+        try:
+            data = self._nodes[self.joints.node_ids[i]].sdo.upload(objects.index(index), sub)
+        except canopen.SdoCommunicationError as exc:
+            raise DriverCommunicationError(f"no answer to the SDO read of "
+                                           f"0x{objects.index(index):04X}:{sub} ({exc})",
+                                           self.devices[i]) from exc
         return objects.decode(index, sub, data)
 
     def _write(self, i: int, index: int, value, sub: int = 0) -> None:
@@ -700,13 +708,9 @@ class Cia402Driver(CanDriver):
         units = np.rint(motor * self._vel_units_per_rev_s)
         for i, value in enumerate(units):
             if self._in_torque[i]:
-                # back to the velocity mode: one SDO (the velocity RPDO does not carry it)
-                try:
-                    self._write(i, co.MODES_OF_OPERATION, int(self._mode))
-                except (canopen.SdoCommunicationError, canopen.SdoAbortedError,
-                        DriverFault) as exc:
-                    raise DriverCommunicationError(f"mode switch failed: {exc}",
-                                                   self.devices[i]) from exc
+                # back to the velocity mode: one SDO (the velocity RPDO does not
+                # carry it); a failure names the drive and the object
+                self._write(i, co.MODES_OF_OPERATION, int(self._mode))
                 self._in_torque[i] = False
             self._send_velocity(i, Control.ENABLE_OPERATION, value)
 
