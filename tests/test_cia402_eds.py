@@ -28,6 +28,7 @@ from holonomic_core.controller import load_config
 from holonomic_core.driver import DriverFault
 from holonomic_core.model import resolve_config
 from holonomic_core.schema import ConfigError
+from holonomic_drivers import eds_check
 from holonomic_drivers.cia402_protocol import State
 from holonomic_drivers.emulated_cia402 import ABORT_CANNOT_MAP, EmulatedCia402Drive
 from holonomic_drivers.emulation import EmulatorThread
@@ -365,3 +366,24 @@ def test_bringup_exits_2_on_a_bad_drive_file(start_bringup, tmp_path, extra, wor
     assert proc.proc.wait(30) == 2
     log = proc.log()
     assert words in log and "Traceback" not in log
+
+
+def test_eds_check_dry_runs_a_configuration_against_its_files(capsys):
+    """python -m holonomic_drivers.eds_check: the PDOs and watchdog of each
+    joint, a tenth of each joint's limit read back (hamr: 20 rad/s wheels ->
+    2 rad/s; 4.712 rad/s turret -> 0.4712), the fault, the stop; exit 0."""
+    assert eds_check.main(["hamr", "-p", f"cia402.eds={DATA / 'pv_only_guarding.eds'}",
+                           "-p", "cia402.mode=pv"]) == 0
+    out = capsys.readouterr().out
+    assert ("left_wheel_joint (CANopen node 1): " + str(DATA / "pv_only_guarding.eds")
+            + "; RPDO2 0x301 = 0x6040 (16) + 0x60FF (32); TPDO2 0x281 = 0x6064 (32) + "
+            "0x606C (32); TPDO1 0x181 = 0x6041 (16); watchdog guarding") in out
+    assert "velocity: commanded [2.0, 2.0, 0.4712] rad/s" in out
+    assert "fault reported: left_wheel_joint (CANopen node 1)" in out
+    assert "passed" in out.splitlines()[-1]
+
+
+def test_eds_check_refuses_a_mode_the_file_does_not_offer_with_exit_2(capsys):
+    assert eds_check.main(["hamr", "-p", f"cia402.eds={DATA / 'pv_only_guarding.eds'}"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cia402.mode" in err and "pp, pv" in err

@@ -742,6 +742,30 @@ class Cia402Driver(CanDriver):
             self._send_torque(i, Control.ENABLE_OPERATION, units)
             self._in_torque[i] = True
 
+    def wiring(self) -> list[str]:
+        """One line per joint: its drive, file, axis, PDOs (COB-ID = objects)
+        and watchdog -- what configure sets up (the watchdog once configured)."""
+        lines = []
+        for i, w in enumerate(self._wiring):
+            node = self.joints.node_ids[i]
+            plan = self._plans[node]
+
+            def pdo(kind: str, pdos: dict, cobs: dict, cob: int | None) -> str:
+                if cob is None:
+                    return ""
+                k = next(k for k in pdos if cobs[k] & 0x7FF == cob & 0x7FF)
+                objects = " + ".join(f"0x{index:04X} ({bits})" for index, _, bits in pdos[k])
+                return f"{kind}{k + 1} 0x{cob & 0x7FF:03X} = {objects}; "
+
+            lines.append(
+                f"{self.devices[i]}: {w.objects.source or 'generic drive (no EDS)'}; "
+                + pdo("RPDO", plan.rx, plan.rx_cob, w.rx_velocity)
+                + pdo("RPDO", plan.rx, plan.rx_cob, w.rx_torque)
+                + pdo("TPDO", plan.tx, plan.tx_cob, w.tx_feedback)
+                + pdo("TPDO", plan.tx, plan.tx_cob, w.tx_status)
+                + f"watchdog {self._watchdog_kind.get(node, 'not set up yet')}")
+        return lines
+
     def status(self) -> dict[str, str]:
         out = super().status()
         now = time.monotonic()
