@@ -29,6 +29,7 @@ from holonomic_core.driver import DriverFault
 from holonomic_core.model import resolve_config
 from holonomic_core.schema import ConfigError
 from holonomic_drivers import eds_check
+from holonomic_drivers.eds_check import cycle_until, wait_until
 from holonomic_drivers.cia402_protocol import State
 from holonomic_drivers.emulated_cia402 import ABORT_CANNOT_MAP, EmulatedCia402Drive
 from holonomic_drivers.emulation import EmulatorThread
@@ -61,26 +62,8 @@ def rig_factory():
 
 
 def run_until(rig, condition, velocities=None, timeout: float = 10.0):
-    """Cycle the driver (write, read, 5 ms) until ``condition(reading)``."""
-    deadline = time.monotonic() + timeout
-    while True:
-        if velocities is not None:
-            rig.driver.write_velocities(velocities)
-        reading = rig.driver.read()
-        if condition(reading):
-            return reading
-        if time.monotonic() > deadline:
-            raise AssertionError(f"condition not met within {timeout} s (last reading "
-                                 f"{reading.velocities})")
-        time.sleep(0.005)
-
-
-def wait_for(condition, timeout: float = 5.0, what: str = "condition") -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"no {what} within {timeout} s")
-        time.sleep(0.005)
+    """Cycle the rig's driver (write, read, 5 ms) until ``condition(reading)``."""
+    return cycle_until(rig.driver, condition, velocities, timeout)
 
 
 def sdo_writes(frames, node: int) -> list[tuple[int, int, int]]:
@@ -135,7 +118,7 @@ def test_drive_from_its_file_runs_faults_and_stops(rig_factory, eds, overrides):
     # stop: every motor ramps to standstill, and the positions read are the
     # motors' (whole counts: 2 pi / 16384 rad on a wheel)
     rig.driver.deactivate()
-    wait_for(lambda: all(d.velocity_rev_per_s == 0.0 for d in rig.devices), what="standstill")
+    wait_until(lambda: all(d.velocity_rev_per_s == 0.0 for d in rig.devices), what="standstill")
     reading = run_until(rig, lambda r: np.allclose(r.positions, rig.motor_to_joint_positions(),
                                                    atol=2 * math.pi / 16384))
     assert np.abs(reading.positions).max() > 0.05                  # it did move
@@ -240,11 +223,11 @@ def test_drive_stops_by_itself_when_the_controller_dies(rig_factory, eds, overri
     run_until(rig, lambda r: np.allclose([d.velocity_rev_per_s for d in rig.devices],
                                          MOTOR_REV_S, atol=1e-9), velocities=COMMAND)
     dead = time.time()
-    wait_for(lambda: all(d.state() is State.FAULT for d in rig.devices), 5.0, "watchdog fault")
+    wait_until(lambda: all(d.state() is State.FAULT for d in rig.devices), 5.0, "watchdog fault")
     emcy = [m for m in rig.sniff() if m.arbitration_id == 0x81 and m.timestamp > dead]
     assert emcy and struct.unpack_from("<H", bytes(emcy[0].data))[0] == 0x8130
     assert emcy[0].timestamp - dead >= 0.25 - 0.05
-    wait_for(lambda: all(d.velocity_rev_per_s == 0.0 for d in rig.devices), what="standstill")
+    wait_until(lambda: all(d.velocity_rev_per_s == 0.0 for d in rig.devices), what="standstill")
 
 
 def test_drive_without_watchdog_objects_starts_with_a_warning(rig_factory):

@@ -85,21 +85,21 @@ def run(robot: str, overrides: dict, out=None, err=None) -> int:
             driver.activate()
             step = "velocity"
             command = np.array([0.1 * values[f"joints.{j}.max_velocity"] for j in joints])
-            reading = _until(driver, lambda r: np.allclose(r.velocities, command,
-                                                           rtol=0.01, atol=1e-3), command)
+            reading = cycle_until(driver, lambda r: np.allclose(r.velocities, command,
+                                                                rtol=0.01, atol=1e-3), command)
             print(f"  velocity: commanded {np.round(command, 4).tolist()} rad/s, read "
                   f"{np.round(reading.velocities, 4).tolist()} rad/s", file=out)
             step = "fault"
             first = devices[driver.joints.node_ids[0]]
             first.inject_fault(0x2310)
             try:
-                _until(driver, lambda r: False, command)
+                cycle_until(driver, lambda r: False, command)
             except DriverFault as exc:
                 print(f"  fault reported: {exc}", file=out)
             step = "stop"
             driver.deactivate()
-            _wait(lambda: all(d.motor(k).velocity() == 0.0 for d in devices.values()
-                              for k in range(len(d.axes))))
+            wait_until(lambda: all(d.motor(k).velocity() == 0.0 for d in devices.values()
+                                   for k in range(len(d.axes))), what="standstill")
             print("  stop: every motor at standstill", file=out)
     except (DriverError, TimeoutError) as exc:
         print(f"eds_check: {step} failed: {exc}", file=err)
@@ -112,10 +112,14 @@ def run(robot: str, overrides: dict, out=None, err=None) -> int:
     return 0
 
 
-def _until(driver, condition, command, timeout: float = 10.0):
+def cycle_until(driver, condition, velocities=None, timeout: float = 10.0):
+    """Cycle ``driver`` (write ``velocities`` [rad/s] if given, read, 5 ms)
+    until ``condition(reading)``; returns that reading, TimeoutError after
+    ``timeout`` [s]. Driver errors propagate."""
     deadline = time.monotonic() + timeout
     while True:
-        driver.write_velocities(command)
+        if velocities is not None:
+            driver.write_velocities(velocities)
         reading = driver.read()
         if condition(reading):
             return reading
@@ -125,11 +129,12 @@ def _until(driver, condition, command, timeout: float = 10.0):
         time.sleep(0.005)
 
 
-def _wait(condition, timeout: float = 5.0) -> None:
+def wait_until(condition, timeout: float = 5.0, what: str = "condition") -> None:
+    """Poll ``condition()`` every 5 ms; TimeoutError after ``timeout`` [s]."""
     deadline = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > deadline:
-            raise TimeoutError(f"not within {timeout:g} s")
+            raise TimeoutError(f"no {what} within {timeout:g} s")
         time.sleep(0.005)
 
 
