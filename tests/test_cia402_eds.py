@@ -370,3 +370,25 @@ def test_eds_check_refuses_a_mode_the_file_does_not_offer_with_exit_2(capsys):
     assert eds_check.main(["hamr", "-p", f"cia402.eds={DATA / 'pv_only_guarding.eds'}"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "cia402.mode" in err and "pp, pv" in err
+
+
+def test_dictionary_view_offsets_axes_clips_and_names_codes():
+    """cia402_dictionary alone. Axis 1's controlword: 0x6040 + 0x800 = 0x6840;
+    communication objects do not move (0x1016 stays). A 16-bit target of
+    40000 saturates at 32767 = 0x7FFF (little-endian ff 7f), -40000 at
+    -32768 = 0x8000 (00 80). 0x6502 = 0b1_0000_0101 = bits 0, 2, 8 -> pp, pv,
+    csv. 0x60A9 0x00B44700 = rev/min -> 60 units per rev/s."""
+    from canopen.objectdictionary import datatypes as dt
+    from holonomic_drivers.cia402_dictionary import (AxisObjects, SI_VELOCITY_UNITS,
+                                                     generic_dictionary, mode_names)
+    od = generic_dictionary(5, axes=2, target_velocity_type=dt.INTEGER16)
+    axis1 = AxisObjects(od, 1)
+    assert axis1.index(0x6040) == 0x6840 and axis1.index(0x1016) == 0x1016
+    assert axis1.bits(0x60FF) == 16 and axis1.mappable(0x60FF)
+    assert axis1.encode(0x60FF, 0, 40000) == bytes.fromhex("ff7f")
+    assert axis1.encode(0x60FF, 0, -40000) == bytes.fromhex("0080")
+    assert axis1.default(0x1800, 1) == 0x185                 # $NODEID + 0x180, node 5
+    assert not AxisObjects(od, 2).has(0x6040)
+    assert mode_names(0b1_0000_0101) == "pp, pv, csv"
+    assert SI_VELOCITY_UNITS[0x00B44700] == ("rpm", 60.0)
+    assert AxisObjects(generic_dictionary(1, first_pdo_entries=1)).mapping_capacity(0x1600) == 1
