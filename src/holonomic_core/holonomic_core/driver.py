@@ -238,6 +238,23 @@ DRIVER_REGISTRY: dict[str, str] = {
 }
 
 
+#: ``--sim-drives``: a function of a CAN backend class -> the driver class that
+#: runs it on emulated drives whose motors are simulated joints
+SIM_DRIVES = "holonomic_sim.sim_drives:sim_drives_driver"
+
+
+def sim_drives_driver(backend: type[Driver]) -> type[Driver]:
+    """The ``sim_drives`` driver class for ``backend`` (imported only now);
+    ConfigError for a backend that is not a CAN backend."""
+    module_name, _, function = SIM_DRIVES.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ConfigError("sim_drives", True,
+                          f"false: the simulator is not installed ({exc})") from exc
+    return getattr(module, function)(backend)
+
+
 def driver_class(name: str) -> type[Driver]:
     """Resolve a backend name, importing its module only now."""
     try:

@@ -1,0 +1,221 @@
+"""The real CAN drivers on simulated physics (``--driver odrive_can|cia402 --sim-drives``).
+
+:func:`sim_drives_driver` turns a CAN backend class into a driver that runs,
+in this process:
+
+* the backend itself, unchanged -- frames, scaling through the YAML's gear
+  ratios and directions, heartbeats, timeouts, fault handling -- on a private
+  python-can ``virtual`` channel (the YAML's ``interface`` and ``channel``
+  are ignored);
+* one emulated drive per joint (:mod:`holonomic_drivers.emulation`, the
+  ODrive axis with the YAML's ``odrive_can.firmware``) in a background thread
+  that polls the bus every millisecond;
+* the pybullet simulator (:class:`~holonomic_sim.sim_driver.SimDriver`, all
+  ``sim.*`` parameters apply), whose joints are the drives' motors
+  (:mod:`holonomic_sim.joint_motor`) through the mechanism's true gear ratio
+  and direction: ``sim_drives.joints.<joint>.gear_ratio`` / ``.direction``,
+  by default the YAML's own.
+
+Who steps the physics: :meth:`read`, once per control period, as the
+``sim`` driver does -- it hands the drives' latest setpoints to the
+simulator, advances it by one period, then lets the CAN backend read what
+the drives sent. The simulation therefore runs as fast as the control loop
+calls it (real time under the base controller); the drives run on the wall
+clock, so readings are stamped on ``time.monotonic()`` as on a real robot
+(no ``/clock``), and ``ground_truth/odom`` comes from the simulator.
+
+The YAML check: each joint's reading through the YAML's mapping is compared
+with the simulated joint over every 2 rad of joint travel; if it reads more
+than 15 % off (a gear ratio) or backwards (a direction) the driver faults,
+naming the joint, the factor and the keys to check. The factor is
+``(d_true g_true) / (d_yaml g_yaml)``: -1 for a wrong direction, 1.2 for a
+YAML gear ratio of 10 on a 12:1 gearbox.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+
+import numpy as np
+
+from holonomic_core.driver import Driver, DriverFault, JointReading
+from holonomic_core.schema import ConfigError, ParamSpec
+
+#: the backends that can run on simulated drives
+BACKENDS = ("odrive_can", "cia402")
+#: joint travel [rad] over which the YAML check compares, and its tolerance
+CHECK_TRAVEL = 2.0
+CHECK_TOLERANCE = 0.15
+_channels = itertools.count()
+
+
+def sim_drives_driver(backend: type[Driver]) -> type[Driver]:
+    """The ``--sim-drives`` driver class for CAN backend class ``backend``."""
+    if backend.name not in BACKENDS:
+        raise ConfigError("sim_drives", True,
+                          f"false with driver '{backend.name}' (simulated drives exist for "
+                          f"{' and '.join(BACKENDS)} only)")
+    return type(f"SimDrives{backend.__name__}", (SimDrivesDriver,),
+                {"backend": backend, "name": backend.name,
+                 "supports_effort": backend.supports_effort})
+
+
+def truth_specs(model) -> list[ParamSpec]:
+    """Schema of ``sim_drives.joints.<joint>.gear_ratio / direction``."""
+    specs = []
+    for joint in model.joint_names:
+        base = f"sim_drives.joints.{joint}"
+        specs += [
+            ParamSpec(f"{base}.gear_ratio", "double",
+                      f"--sim-drives: the true gear ratio of {joint}'s mechanism (motor rev "
+                      "per joint rev); 0: the one the driver's YAML states [-].",
+                      default=0.0, minimum=0.0, maximum=1e4),
+            ParamSpec(f"{base}.direction", "int",
+                      f"--sim-drives: the true direction of {joint}'s motor (+1 or -1); "
+                      "0: the one the driver's YAML states.",
+                      default=0, minimum=-1, maximum=1),
+        ]
+    return specs
+
+
+class SimDrivesDriver(Driver):
+    """A CAN backend on emulated drives whose motors are simulated joints.
+
+    Subclasses made by :func:`sim_drives_driver` set ``backend``.
+    """
+
+    backend: type[Driver]
+
+    @classmethod
+    def param_specs(cls, model) -> list[ParamSpec]:
+        from holonomic_sim.sim_driver import SimDriver
+
+        return cls.backend.param_specs(model) + SimDriver.param_specs(model) + truth_specs(model)
+
+    def __init__(self, model, params, control_rate: float):
+        from holonomic_sim.sim_driver import SimDriver
+
+        super().__init__(model, params, control_rate)
+        self.channel = f"sim-drives-{os.getpid()}-{next(_channels)}"
+        own = dict(params)
+        own[f"{self.name}.interface"] = "virtual"
+        own[f"{self.name}.channel"] = self.channel
+        self.can = self.backend(model, own, control_rate)
+        self.sim = SimDriver(model, params, control_rate)
+        prefix = f"{self.name}.joints"
+        self.true_gear_ratios, self.true_directions = [], []
+        for joint in model.joint_names:
+            gear = params[f"sim_drives.joints.{joint}.gear_ratio"]
+            direction = params[f"sim_drives.joints.{joint}.direction"]
+            self.true_gear_ratios.append(gear or params[f"{prefix}.{joint}.gear_ratio"])
+            self.true_directions.append(direction or params[f"{prefix}.{joint}.direction"])
+        self.devices = []
+        self._emulators = None
+        self._joints = None
+        self._reference: tuple[np.ndarray, np.ndarray] | None = None
+
+    # -- lifecycle ----------------------------------------------------------------
+    def _on_configure(self) -> None:
+        from holonomic_drivers.emulation import EmulatorThread
+        from holonomic_sim.joint_motor import SimulatedJoints
+
+        self.sim.configure()
+        try:
+            # the simulated motors are powered; the emulated drives decide
+            # (an idle drive commands zero speed)
+            self.sim.activate()
+            self._joints = SimulatedJoints(
+                self.sim, np.array([j.max_effort for j in self.model.joint_limits]),
+                self.model.max_joint_velocity)
+            self._joints.step()
+            self.devices = [self._make_device(i) for i in range(len(self.model.joint_names))]
+            self._emulators = EmulatorThread(self.devices).start()
+            self.can.configure()
+        except BaseException:
+            self._shutdown()
+            raise
+
+    def _make_device(self, i: int):
+        from holonomic_drivers.emulation import EmulatedCia402Drive, EmulatedOdriveAxis
+        from holonomic_sim.joint_motor import SimulatedJointMotor
+
+        joint = self.model.joint_names[i]
+        base = f"{self.name}.joints.{joint}"
+        motor = SimulatedJointMotor(self._joints, i, self.true_gear_ratios[i],
+                                    self.true_directions[i], self.params[f"{base}.position_offset"])
+        node = self.params[f"{base}.node_id"]
+        if self.name == "odrive_can":
+            return EmulatedOdriveAxis(node, self.channel, motor=motor,
+                                      firmware=self.params["odrive_can.firmware"])
+        return EmulatedCia402Drive(node, self.channel, motor=motor,
+                                   encoder_resolution=self.params[f"{base}.encoder_resolution"])
+
+    def _on_activate(self) -> None:
+        self.can.activate()
+
+    def _on_deactivate(self) -> None:
+        self.can.deactivate()
+
+    def _on_close(self) -> None:
+        self._shutdown()
+
+    def _shutdown(self) -> None:
+        try:
+            self.can.close()
+        finally:
+            if self._emulators is not None:
+                self._emulators.stop()
+                self._emulators = None
+            for device in self.devices:
+                device.close()
+            self.devices = []
+            self.sim.close()
+
+    # -- cycle --------------------------------------------------------------------------
+    def _on_read(self) -> JointReading:
+        truth = self._joints.step()
+        reading = self.can.read()
+        self._check_mapping(reading.positions, truth.positions)
+        return reading
+
+    def _check_mapping(self, read: np.ndarray, true: np.ndarray) -> None:
+        """Fault when a joint's YAML mapping disagrees with the simulated mechanism."""
+        if self._reference is None:
+            self._reference = (read.copy(), true.copy())
+            return
+        read0, true0 = self._reference
+        travel = true - true0
+        for i in np.flatnonzero(np.abs(travel) >= CHECK_TRAVEL):
+            factor = (read[i] - read0[i]) / travel[i]
+            read0[i], true0[i] = read[i], true[i]
+            if abs(factor - 1.0) > CHECK_TOLERANCE:
+                joint = self.model.joint_names[i]
+                raise DriverFault(
+                    f"reads {factor:+.2f} times the simulated joint's motion: "
+                    f"{self.name}.joints.{joint}.direction x gear_ratio in the YAML "
+                    f"({self.params[f'{self.name}.joints.{joint}.direction']:+d} x "
+                    f"{self.params[f'{self.name}.joints.{joint}.gear_ratio']:g}) does "
+                    f"not match the mechanism ({self.true_directions[i]:+d} x "
+                    f"{self.true_gear_ratios[i]:g})", self.can.devices[i])
+
+    def _on_write_velocities(self, velocities: np.ndarray) -> None:
+        self.can.write_velocities(velocities)
+
+    def _on_write_efforts(self, efforts: np.ndarray) -> None:
+        self.can.write_efforts(efforts)
+
+    # -- capabilities -------------------------------------------------------------------
+    def ground_truth(self):
+        return self.sim.ground_truth()
+
+    def status(self) -> dict[str, str]:
+        values = self.can.status()
+        values["state"] = self.state.value
+        values["sim_drives"] = (f"{len(self.devices)} emulated {self.can.device_kind} drives "
+                                f"on virtual:{self.channel}, motors = simulated joints")
+        sim = self.sim.status()
+        for key in ("physics_rate_hz", "sim_time_s", "wheel_friction"):
+            if key in sim:
+                values[key] = sim[key]
+        return values
