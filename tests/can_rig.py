@@ -49,7 +49,9 @@ class CanRig:
                                                self.config.controller.control_rate)
         self.node_ids = self.driver.joints.node_ids
         if backend == "odrive_can":
-            self.devices = [EmulatedOdriveAxis(n, self.channel) for n in self.node_ids]
+            firmware = self.config.values["odrive_can.firmware"]
+            self.devices = [EmulatedOdriveAxis(n, self.channel, firmware=firmware)
+                            for n in self.node_ids]
         else:
             res = [int(self.config.values[f"cia402.joints.{j}.encoder_resolution"])
                    for j in self.model.joint_names]
