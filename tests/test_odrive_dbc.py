@@ -46,9 +46,11 @@ def load_dbc(firmware: str):
 
 def decode(db, msg: can.Message) -> tuple[str, dict, dict]:
     """(message name, {signal: value or choice name}, {signal: unit}); the frame
-    must carry every signal of the DBC's message (a real ODrive takes a frame
-    shorter than the DBC's 8 bytes when it covers the signals)."""
+    must carry every signal of the DBC's message and be no longer than it (a
+    real ODrive takes a frame shorter than the DBC's 8 bytes when it covers
+    the signals: 4-byte Set_Axis_State, as in ODrive's own examples)."""
     message = db.get_message_by_frame_id(msg.arbitration_id)
+    assert len(msg.data) <= message.length, (message.name, bytes(msg.data))
     values = message.decode(bytes(msg.data), decode_choices=True, allow_truncated=True)
     assert set(values) == {s.name for s in message.signals}, (message.name, bytes(msg.data))
     return (message.name, {k: str(v) if hasattr(v, "name") else v for k, v in values.items()},
