@@ -16,18 +16,22 @@ in this process:
   and direction: ``sim_drives.joints.<joint>.gear_ratio`` / ``.direction``,
   by default the YAML's own.
 
-Who steps the physics: :meth:`read`, once per control period, as the
-``sim`` driver does -- it hands the drives' latest setpoints to the
-simulator, advances it by one period, then lets the CAN backend read what
-the drives sent. The simulation therefore runs as fast as the control loop
-calls it (real time under the base controller); the drives run on the wall
-clock, so readings are stamped on ``time.monotonic()`` as on a real robot
-(no ``/clock``), and ``ground_truth/odom`` comes from the simulator.
+Who steps the physics: a thread of its own (:class:`PhysicsThread`), on the
+wall clock like the drives (the emulator thread polls them every
+millisecond) and like real physics, which does not wait for a late control
+loop: every control period it hands the drives' latest setpoints to the
+simulator and advances it by one period (several after a late wake-up, at
+most MAX_CATCH_UP; beyond that the lost time is skipped). The control loop's
+:meth:`read` only reads the CAN backend. Readings are stamped on
+``time.monotonic()`` as on a real robot (no ``/clock``);
+``ground_truth/odom`` comes from the simulator.
 
 The YAML check: each joint's reading through the YAML's mapping is compared
-with the simulated joint over every 2 rad of joint travel; if it reads more
-than 15 % off (a gear ratio) or backwards (a direction) the driver faults,
-naming the joint, the factor and the keys to check. The factor is
+with the simulated joint over windows of joint travel (at least 0.5 rad, and
+long enough that the reading's lag behind the joint cannot pass for a
+mistake: 1 s of travel at the joint's speed); if it reads more than 15 % off
+(a gear ratio) or backwards (a direction) the driver faults, naming the
+joint, the factor and the keys to check. The factor is
 ``(d_true g_true) / (d_yaml g_yaml)``: -1 for a wrong direction, 1.2 for a
 YAML gear ratio of 10 on a 12:1 gearbox.
 """
@@ -36,18 +40,75 @@ from __future__ import annotations
 
 import itertools
 import os
+import threading
+import time
 
 import numpy as np
 
-from holonomic_core.driver import Driver, DriverFault, JointReading
+from holonomic_core.driver import Driver, DriverError, DriverFault, JointReading
 from holonomic_core.schema import ConfigError, ParamSpec
 
 #: the backends that can run on simulated drives
 BACKENDS = ("odrive_can", "cia402")
-#: joint travel [rad] over which the YAML check compares, and its tolerance
-CHECK_TRAVEL = 2.0
+#: the YAML check: relative tolerance of a joint's reading against the
+#: simulated joint, the least joint travel [rad] it compares over, and how
+#: far [s] a reading may lag the joint (the backends' feedback timeouts;
+#: measured up to 35 ms on a loaded machine)
 CHECK_TOLERANCE = 0.15
+CHECK_MIN_TRAVEL = 0.5
+READING_LAG = 0.05
+#: control periods the physics may catch up after a late wake-up
+MAX_CATCH_UP = 20
 _channels = itertools.count()
+
+
+class PhysicsThread:
+    """Steps :class:`~holonomic_sim.joint_motor.SimulatedJoints` every
+    ``period`` [s] of the wall clock. ``lock`` guards the simulator: hold it
+    for any other call into it (ground truth, status)."""
+
+    def __init__(self, joints, period: float):
+        self.joints = joints
+        self.period = float(period)
+        self.lock = threading.Lock()
+        self._truth = None
+        self._error: BaseException | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="sim-drives-physics",
+                                        daemon=True)
+
+    def start(self) -> "PhysicsThread":
+        with self.lock:
+            self._truth = self.joints.step()
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+
+    def latest(self) -> JointReading:
+        """The simulator's reading after the last step; re-raises what stopped the thread."""
+        if self._error is not None:
+            raise self._error
+        return self._truth
+
+    def _run(self) -> None:
+        stepped_to = time.monotonic()
+        while not self._stop.is_set():
+            periods = int((time.monotonic() - stepped_to) / self.period)
+            if periods > MAX_CATCH_UP:
+                stepped_to += (periods - MAX_CATCH_UP) * self.period    # time lost
+                periods = MAX_CATCH_UP
+            try:
+                for _ in range(periods):
+                    with self.lock:
+                        self._truth = self.joints.step()
+            except DriverError as exc:          # e.g. the simulated base tipped over
+                self._error = exc
+                return
+            stepped_to += periods * self.period
+            self._stop.wait(max(0.0, stepped_to + self.period - time.monotonic()))
 
 
 def sim_drives_driver(backend: type[Driver]) -> type[Driver]:
@@ -113,7 +174,8 @@ class SimDrivesDriver(Driver):
         self.devices = []
         self._emulators = None
         self._joints = None
-        self._reference: tuple[np.ndarray, np.ndarray] | None = None
+        self._reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._physics: PhysicsThread | None = None
 
     # -- lifecycle ----------------------------------------------------------------
     def _on_configure(self) -> None:
@@ -128,7 +190,7 @@ class SimDrivesDriver(Driver):
             self._joints = SimulatedJoints(
                 self.sim, np.array([j.max_effort for j in self.model.joint_limits]),
                 self.model.max_joint_velocity)
-            self._joints.step()
+            self._physics = PhysicsThread(self._joints, 1.0 / self.control_rate).start()
             self.devices = [self._make_device(i) for i in range(len(self.model.joint_names))]
             self._emulators = EmulatorThread(self.devices).start()
             self.can.configure()
@@ -170,25 +232,37 @@ class SimDrivesDriver(Driver):
             for device in self.devices:
                 device.close()
             self.devices = []
+            if self._physics is not None:
+                self._physics.stop()
+                self._physics = None
             self.sim.close()
 
     # -- cycle --------------------------------------------------------------------------
     def _on_read(self) -> JointReading:
-        truth = self._joints.step()
+        truth = self._physics.latest()
         reading = self.can.read()
-        self._check_mapping(reading.positions, truth.positions)
+        self._check_mapping(reading.positions, truth.positions, truth.velocities)
         return reading
 
-    def _check_mapping(self, read: np.ndarray, true: np.ndarray) -> None:
-        """Fault when a joint's YAML mapping disagrees with the simulated mechanism."""
+    def _check_mapping(self, read: np.ndarray, true: np.ndarray, speed: np.ndarray) -> None:
+        """Fault when a joint's YAML mapping disagrees with the simulated mechanism.
+
+        ``read``: the backend's joint positions [rad]; ``true``, ``speed``: the
+        simulated joints' positions [rad] and speeds [rad/s]. Per joint, a
+        window runs from a reference sample until the joint has travelled far
+        enough that the reading's lag (at most READING_LAG x speed at each
+        end) is below a third of the tolerance; the factor is then the
+        reading's travel over the joint's, within 0.05 of the truth."""
         if self._reference is None:
-            self._reference = (read.copy(), true.copy())
+            self._reference = (read.copy(), true.copy(), np.abs(speed))
             return
-        read0, true0 = self._reference
+        read0, true0, speed0 = self._reference
         travel = true - true0
-        for i in np.flatnonzero(np.abs(travel) >= CHECK_TRAVEL):
+        needed = np.maximum(CHECK_MIN_TRAVEL, (speed0 + np.abs(speed)) * READING_LAG
+                            * 3.0 / CHECK_TOLERANCE)
+        for i in np.flatnonzero(np.abs(travel) >= needed):
             factor = (read[i] - read0[i]) / travel[i]
-            read0[i], true0[i] = read[i], true[i]
+            read0[i], true0[i], speed0[i] = read[i], true[i], abs(speed[i])
             if abs(factor - 1.0) > CHECK_TOLERANCE:
                 joint = self.model.joint_names[i]
                 raise DriverFault(
@@ -207,14 +281,20 @@ class SimDrivesDriver(Driver):
 
     # -- capabilities -------------------------------------------------------------------
     def ground_truth(self):
-        return self.sim.ground_truth()
+        if self._physics is None:
+            return None
+        with self._physics.lock:
+            return self.sim.ground_truth()
 
     def status(self) -> dict[str, str]:
         values = self.can.status()
         values["state"] = self.state.value
         values["sim_drives"] = (f"{len(self.devices)} emulated {self.can.device_kind} drives "
                                 f"on virtual:{self.channel}, motors = simulated joints")
-        sim = self.sim.status()
+        if self._physics is None:
+            return values
+        with self._physics.lock:
+            sim = self.sim.status()
         for key in ("physics_rate_hz", "sim_time_s", "wheel_friction"):
             if key in sim:
                 values[key] = sim[key]
