@@ -243,16 +243,21 @@ DRIVER_REGISTRY: dict[str, str] = {
 SIM_DRIVES = "holonomic_sim.sim_drives:sim_drives_driver"
 
 
-def sim_drives_driver(backend: type[Driver]) -> type[Driver]:
-    """The ``sim_drives`` driver class for ``backend`` (imported only now);
-    ConfigError for a backend that is not a CAN backend."""
-    module_name, _, function = SIM_DRIVES.partition(":")
+def _import(target: str, key: str, value, wanted: str):
+    """``"module:attribute"`` imported now; ConfigError(key, value, wanted) if it cannot be."""
+    module_name, _, attribute = target.partition(":")
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise ConfigError("sim_drives", True,
-                          f"false: the simulator is not installed ({exc})") from exc
-    return getattr(module, function)(backend)
+        raise ConfigError(key, value, f"{wanted} ({module_name}: {exc})") from exc
+    return getattr(module, attribute)
+
+
+def sim_drives_driver(backend: type[Driver]) -> type[Driver]:
+    """The ``sim_drives`` driver class for ``backend`` (imported only now);
+    ConfigError for a backend that is not a CAN backend."""
+    return _import(SIM_DRIVES, "sim_drives", True,
+                   "false: the simulator is not installed")(backend)
 
 
 def driver_class(name: str) -> type[Driver]:
@@ -261,10 +266,4 @@ def driver_class(name: str) -> type[Driver]:
         target = DRIVER_REGISTRY[name]
     except KeyError:
         raise ConfigError("driver", name, f"one of {sorted(DRIVER_REGISTRY)}") from None
-    module_name, _, class_name = target.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise ConfigError("driver", name,
-                          f"a backend whose package is installed ({module_name}: {exc})") from exc
-    return getattr(module, class_name)
+    return _import(target, "driver", name, "a backend whose package is installed")

@@ -20,7 +20,8 @@ instead of ideal motors. Two pieces:
       tau_joint = direction * gear_ratio * tau_motor      (ideal gear)
 
 Thread safety: the drives command and sample their motors from the emulator
-thread, the control loop steps the physics; one lock guards both.
+thread, another thread steps the physics (:mod:`holonomic_sim.sim_drives`);
+one lock guards the commands and states.
 """
 
 from __future__ import annotations

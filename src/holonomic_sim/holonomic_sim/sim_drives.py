@@ -29,7 +29,7 @@ most MAX_CATCH_UP; beyond that the lost time is skipped). The control loop's
 The YAML check: each joint's reading through the YAML's mapping is compared
 with the simulated joint over windows of joint travel (at least 0.5 rad, and
 long enough that the reading's lag behind the joint cannot pass for a
-mistake: 1 s of travel at the joint's speed); if it reads more than 15 % off
+mistake: as far as the joint goes in 1 s at its speeds at both ends); if it reads more than 15 % off
 (a gear ratio) or backwards (a direction) the driver faults, naming the
 joint, the factor and the keys to check. The factor is
 ``(d_true g_true) / (d_yaml g_yaml)``: -1 for a wrong direction, 1.2 for a
@@ -52,8 +52,8 @@ from holonomic_core.schema import ConfigError, ParamSpec
 BACKENDS = ("odrive_can", "cia402")
 #: the YAML check: relative tolerance of a joint's reading against the
 #: simulated joint, the least joint travel [rad] it compares over, and how
-#: far [s] a reading may lag the joint (the backends' feedback timeouts;
-#: measured up to 35 ms on a loaded machine)
+#: far [s] a reading may lag the joint (the backends' default feedback
+#: timeouts: a later reading is a fault of its own)
 CHECK_TOLERANCE = 0.15
 CHECK_MIN_TRAVEL = 0.5
 READING_LAG = 0.05
