@@ -27,10 +27,11 @@ from ros_probe import Probe, relative_pose
 
 
 #: These tests are about motion and mapping, not timing: the drives may
-#: answer 0.2 s late before the backends call it a fault (default 0.05 s),
-#: so that a test machine running many other jobs does not stop the robot.
-TIMING = {"odrive_can": {"odrive_can.feedback_timeout": 0.2},
-          "cia402": {"cia402.feedback_timeout": 0.2}}
+#: answer 0.2 s late before the backends (or the controller's reading
+#: monitor) call it a fault (default 0.05 s), so that a test machine running
+#: many other jobs does not stop the robot.
+TIMING = {"odrive_can": {"odrive_can.feedback_timeout": 0.2, "safety.reading_timeout": 0.2},
+          "cia402": {"cia402.feedback_timeout": 0.2, "safety.reading_timeout": 0.2}}
 
 
 class SimDrivesRig:
@@ -53,10 +54,11 @@ class SimDrivesRig:
         assert future.result(timeout=5.0) == (True, "motors armed")
 
     def run(self, seconds: float, twist) -> None:
-        """Command ``twist`` for ``seconds`` (or until a fault)."""
+        """Command ``twist`` for ``seconds`` of the wall clock, on which the
+        simulated physics runs (or until a fault)."""
         period = self.controller.dt
-        next_time = time.monotonic()
-        for _ in range(round(seconds / period)):
+        start = next_time = time.monotonic()
+        while time.monotonic() - start < seconds:
             self.controller.set_command(np.asarray(twist, float))
             self.controller.step()
             if self.controller.fault is not None:
@@ -93,11 +95,11 @@ def test_the_can_driver_drives_the_simulated_base_and_odometry_matches_ground_tr
     truth = rig.driver.ground_truth().pose
     odom = rig.controller.odometry.pose
     # 0.3 m/s for 2 s after a 0.3 s ramp at 1 m/s^2 (hamr.yaml): 0.3 (2 - 0.15)
-    # = 0.555 m of command; the drives' frames (one cycle late) and the loop's
-    # jitter under load take some of it (measured 0.54..0.56)
+    # = 0.555 m of command; the drives' frames (one cycle late) and late
+    # cycles on a loaded machine take some of it (measured 0.50..0.56)
     assert 0.45 < truth[0] < 0.6
     # the encoders, through the YAML's mapping, tell the truth (measured
-    # |odom - truth| < 4 mm over this run)
+    # |odom - truth| <= 4.5 mm over six runs)
     assert np.abs(odom - truth) == pytest.approx(np.zeros(3), abs=0.02)
     # the joints moved through the CAN driver: its frame counters grew
     assert int(rig.driver.status()["frames_sent"]) > 100
@@ -119,7 +121,8 @@ def test_a_wrong_direction_in_the_yaml_faults_naming_the_joint(rig_factory):
     assert _factor(fault) == pytest.approx(-1.0, abs=0.05)
     assert "odrive_can.joints.right_wheel_joint.direction" in fault
     # what the robot did meanwhile: the wheels turned against each other, the
-    # base spun while the encoders said it drove straight
+    # base spun while the encoders said it drove straight (measured: odometry
+    # 0.30 m ahead, heading -0.0004 rad; truth turned -1.83 rad)
     truth, odom = rig.driver.ground_truth().pose, rig.controller.odometry.pose
     assert abs(odom[2]) < 0.01 and abs(truth[2]) > 0.3
     # the controller stopped the drives: every axis idle
@@ -135,7 +138,7 @@ def test_a_wrong_gear_ratio_in_the_yaml_faults_naming_the_joint(rig_factory):
     rig.run(3.0, (0.3, 0.0, 0.0))
     fault = rig.controller.fault
     assert fault is not None and "left_wheel_joint (CANopen node 1)" in fault, fault
-    # reading / true motion = (1 x 1) / (1 x 1.25) = 0.8
+    # reading / true motion = (1 x 1) / (1 x 1.25) = 0.8 (measured 0.77)
     assert _factor(fault) == pytest.approx(0.8, abs=0.05)
     assert "1.25" in fault
 
@@ -159,9 +162,9 @@ def test_bringup_refuses_sim_drives_without_a_can_driver(args):
 @pytest.mark.parametrize("backend", ["odrive_can", "cia402"])
 def test_bringup_with_sim_drives_drives_the_robot_over_ros(ros, start_bringup, backend):
     ns = f"simdrives_{backend}"
-    [(key, value)] = TIMING[backend].items()
+    timing = [arg for key, value in TIMING[backend].items() for arg in ("-p", f"{key}:={value}")]
     proc = start_bringup("hamr", "--driver", backend, "--sim-drives", "--enable",
-                         "--namespace", ns, "-p", f"{key}:={value}")
+                         "--namespace", ns, *timing)
     probe = Probe(ros, ns)
     try:
         probe.wait_ready()                      # ground_truth/odom is published
@@ -172,10 +175,12 @@ def test_bringup_with_sim_drives_drives_the_robot_over_ros(ros, start_bringup, b
         moved_truth = relative_pose(truth0, probe.latest_truth().pose)
         moved_odom = relative_pose(odom0, probe.latest_odom().pose)
         # an arc of 0.3 m/s and 0.5 rad/s for ~2 s: about 0.5 m and 0.9 rad
-        assert np.linalg.norm(moved_truth[:2]) > 0.35 and moved_truth[2] > 0.6
+        distance = np.linalg.norm(moved_truth[:2])
+        assert distance > 0.35 and moved_truth[2] > 0.6
         # odometry from the drives' encoders agrees with the simulator
-        assert np.linalg.norm(moved_odom[:2] - moved_truth[:2]) < 0.02
-        assert abs(math.remainder(moved_odom[2] - moved_truth[2], 2 * math.pi)) < 0.02
+        # (measured over four runs: at most 1.1 mm and 2.1 mrad)
+        assert np.linalg.norm(moved_odom[:2] - moved_truth[:2]) < 0.01
+        assert abs(math.remainder(moved_odom[2] - moved_truth[2], 2 * math.pi)) < 0.01
         status = next(s for s in probe.diagnostics.status if s.name.endswith("driver"))
         values = {v.key: v.value for v in status.values}
         assert "motors = simulated joints" in values["sim_drives"]
