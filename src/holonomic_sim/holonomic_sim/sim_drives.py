@@ -171,7 +171,8 @@ class SimDrivesDriver(Driver):
             direction = params[f"sim_drives.joints.{joint}.direction"]
             self.true_gear_ratios.append(gear or params[f"{prefix}.{joint}.gear_ratio"])
             self.true_directions.append(direction or params[f"{prefix}.{joint}.direction"])
-        self.devices = []
+        #: the emulated drives, joint_names order
+        self.drives = []
         self._emulators = None
         self._joints = None
         self._reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -191,14 +192,14 @@ class SimDrivesDriver(Driver):
                 self.sim, np.array([j.max_effort for j in self.model.joint_limits]),
                 self.model.max_joint_velocity)
             self._physics = PhysicsThread(self._joints, 1.0 / self.control_rate).start()
-            self.devices = [self._make_device(i) for i in range(len(self.model.joint_names))]
-            self._emulators = EmulatorThread(self.devices).start()
+            self.drives = [self._make_drive(i) for i in range(len(self.model.joint_names))]
+            self._emulators = EmulatorThread(self.drives).start()
             self.can.configure()
         except BaseException:
             self._shutdown()
             raise
 
-    def _make_device(self, i: int):
+    def _make_drive(self, i: int):
         from holonomic_drivers.emulation import EmulatedCia402Drive, EmulatedOdriveAxis
         from holonomic_sim.joint_motor import SimulatedJointMotor
 
@@ -229,9 +230,9 @@ class SimDrivesDriver(Driver):
             if self._emulators is not None:
                 self._emulators.stop()
                 self._emulators = None
-            for device in self.devices:
-                device.close()
-            self.devices = []
+            for drive in self.drives:
+                drive.close()
+            self.drives = []
             if self._physics is not None:
                 self._physics.stop()
                 self._physics = None
@@ -289,7 +290,7 @@ class SimDrivesDriver(Driver):
     def status(self) -> dict[str, str]:
         values = self.can.status()
         values["state"] = self.state.value
-        values["sim_drives"] = (f"{len(self.devices)} emulated {self.can.device_kind} drives "
+        values["sim_drives"] = (f"{len(self.drives)} emulated {self.can.device_kind} drives "
                                 f"on virtual:{self.channel}, motors = simulated joints")
         if self._physics is None:
             return values
