@@ -14,9 +14,9 @@ node ids            0..63                          0..62 (0x3F: broadcast / unad
 Heartbeat bytes 5-7 motor / encoder / controller   procedure result (byte 5),
                     error flags (bit 40, 48, 56),  trajectory done (bit 48)
                     trajectory done (bit 63)
-Axis_Error bits     AxisError of 0.5.x: 0x40       ODrive.Error: 0x40 MISSING_INPUT,
-                    MOTOR_FAILED, 0x800 WATCHDOG   0x1000000 WATCHDOG_TIMER_EXPIRED, ...
-                    _TIMER_EXPIRED, ...
+Axis_Error bits     AxisError of 0.5.x:            ODrive.Error: 0x40 MISSING_INPUT,
+                    0x40 MOTOR_FAILED, 0x800       0x1000000 WATCHDOG_TIMER_EXPIRED, ...
+                    WATCHDOG_TIMER_EXPIRED, ...
 Clear_Errors        no payload                     1 byte (Identify)
 =================== ============================== ===================================
 
@@ -102,7 +102,7 @@ AXIS_ERRORS_0_5 = {
     0x20000: "HOMING_WITHOUT_ENDSTOP", 0x40000: "OVER_TEMP", 0x80000: "UNKNOWN_POSITION",
 }
 
-#: per firmware: the error bits an emulated axis and the tests use by meaning
+#: per firmware: the error bits the emulated axis raises for these conditions
 WATCHDOG_TIMER_EXPIRED = {"0.5": 0x800, "0.6": 0x1000000}
 ESTOP_REQUESTED = {"0.5": 0x4000, "0.6": 0x2000000}
 
