@@ -22,7 +22,9 @@ import numpy as np
 import pytest
 
 from holonomic_core.controller import BaseController, ControllerState, load_config
+from holonomic_core.driver import JointReading
 from holonomic_core.schema import ConfigError
+from holonomic_sim.joint_motor import SimulatedJointMotor, SimulatedJoints
 from ros_probe import Probe, relative_pose
 
 
@@ -191,3 +193,46 @@ def test_bringup_with_sim_drives_drives_the_robot_over_ros(ros, start_bringup, b
     finally:
         probe.close()
     assert proc.stop(signal.SIGINT) == 0, proc.log()
+
+
+class _RecordingSim:
+    """Stands in for the simulator driver: records what SimulatedJoints writes,
+    reads back fixed joint states."""
+
+    def __init__(self, positions, velocities):
+        self.reading = JointReading(0.0, np.array(positions, float),
+                                    np.array(velocities, float), np.zeros(len(positions)))
+        self.writes = []
+
+    def write_velocities(self, v):
+        self.writes.append(("velocity", np.array(v)))
+
+    def write_efforts(self, e):
+        self.writes.append(("effort", np.array(e)))
+
+    def read(self):
+        return self.reading
+
+
+def test_a_simulated_joint_seen_from_the_motor_shaft():
+    sim = _RecordingSim([1.0, -0.5], [2.0, 0.25])
+    joints = SimulatedJoints(sim, max_efforts=np.array([6.0, 4.0]),
+                             max_velocities=np.array([20.0, 10.0]))
+    joints.step()
+    # joint 0 behind a 10:1 gear, mirrored (direction -1), zero at 0.2 rad
+    motor = SimulatedJointMotor(joints, 0, gear_ratio=10.0, direction=-1, position_offset=0.2)
+    # q_motor = -1 * 10 * (1.0 - 0.2) = -8 rad; w_motor = -1 * 10 * 2 = -20 rad/s
+    assert motor.position() == pytest.approx(-8.0)
+    assert motor.velocity() == pytest.approx(-20.0)
+    # both joints in velocity mode: motor -30 rad/s -> joint -30 / (-10) = 3 rad/s
+    motor.command_velocity(-30.0)
+    joints.step()
+    assert sim.writes[-1][0] == "velocity"
+    assert sim.writes[-1][1] == pytest.approx([3.0, 0.0])
+    # joint 0 in torque mode: motor 0.5 N m -> joint -1 * 10 * 0.5 = -5 N m; joint 1
+    # still in velocity mode (setpoint 0, moving at 0.25 rad/s) gets the
+    # proportional loop: gain 4 / (0.1 * 10) = 4 N m/(rad/s) -> -1 N m
+    motor.command_torque(0.5)
+    joints.step()
+    assert sim.writes[-1][0] == "effort"
+    assert sim.writes[-1][1] == pytest.approx([-5.0, -1.0])
