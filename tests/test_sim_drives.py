@@ -149,6 +149,19 @@ def test_a_wrong_gear_ratio_in_the_yaml_faults_naming_the_joint(rig_factory):
     assert "1.25" in fault
 
 
+def test_a_reversed_steering_joint_of_a_caster_base_faults_naming_it(rig_factory):
+    # comr3.yaml: c1's steering motor +1 through 20:1; the mechanism turns it
+    # the other way. The caster steers away from where the controller thinks;
+    # the check fires once the steering joint has turned 0.5 rad.
+    rig = rig_factory("odrive_can", "comr3", **{"sim_drives.joints.c1_steer_joint.direction": -1})
+    rig.arm()
+    rig.run(3.0, (0.2, 0.2, 0.4))
+    fault = rig.controller.fault
+    assert fault is not None and "c1_steer_joint (ODrive node 0)" in fault, fault
+    # (-1 x 20) / (+1 x 20) = -1 (measured -1.00, after 60 cycles, three runs)
+    assert _factor(fault) == pytest.approx(-1.0, abs=0.05)
+
+
 @pytest.mark.parametrize("driver", ["sim", "mock"])
 def test_sim_drives_is_refused_for_backends_without_can(driver):
     with pytest.raises(ConfigError, match="sim_drives"):
