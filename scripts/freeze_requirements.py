@@ -18,7 +18,8 @@ HEADER = """\
 # ros-jazzy-rmw-fastrtps-cpp, ros-jazzy-rosgraph-msgs, ros-jazzy-std-srvs, the
 # rosidl generators and ament_cmake (to build tf2_msgs), numpy, pybullet,
 # pyyaml, matplotlib, python-can, canopen, mcap, mcap-ros2-support,
-# colcon-common-extensions, pytest and hypothesis."""
+# colcon-common-extensions, pytest, hypothesis, and for the tests only cantools
+# and odrive-can (which ships ODrive's CANSimple DBC files)."""
 
 pins = {}
 for dist in md.distributions():

@@ -61,6 +61,9 @@ def generate() -> str:
         specs = driver_class(name).param_specs(stand_in)
         if specs:
             lines += _table(f"Driver `{name}`", specs)
+    from holonomic_sim.sim_drives import truth_specs
+    lines += _table("Simulated drives (`sim_drives: true`, i.e. `--sim-drives`, with odrive_can "
+                    "or cia402; the `sim.*` keys apply too)", truth_specs(stand_in))
     lines.append(END)
     return "\n".join(lines)
 

@@ -50,7 +50,9 @@ class CanRig:
                                                self.config.controller.control_rate)
         self.node_ids = self.driver.joints.node_ids
         if backend == "odrive_can":
-            self.devices = [EmulatedOdriveAxis(n, self.channel) for n in self.node_ids]
+            firmware = self.config.values["odrive_can.firmware"]
+            self.devices = [EmulatedOdriveAxis(n, self.channel, firmware=firmware)
+                            for n in self.node_ids]
         else:
             # one emulated device per node, built from the joint's EDS (the
             # generic drive without one); its velocity unit is what the

@@ -27,7 +27,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                       "or a path to a robot YAML")
     parser.add_argument("--driver", choices=sorted(DRIVER_REGISTRY),
                         help="driver backend (default: the config's `driver`, normally sim)")
-    parser.add_argument("--gui", action="store_true", help="show the pybullet GUI (sim only)")
+    parser.add_argument("--sim-drives", action="store_true",
+                        help="with --driver odrive_can or cia402: run that CAN driver against "
+                             "emulated drives on a virtual bus whose motors are the "
+                             "simulator's joints (check a robot's CAN YAML before the hardware)")
+    parser.add_argument("--gui", action="store_true",
+                        help="show the pybullet GUI (sim and --sim-drives only)")
     parser.add_argument("--namespace", default="", help="ROS namespace of the robot's "
                                                         "node and topics")
     parser.add_argument("--params-file", action="append", default=[], metavar="FILE",
@@ -58,6 +63,8 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
         ros += ["-p", f"frame_prefix:={ns.strip('/')}/"]
     if args.driver:
         ros += ["-p", f"driver:={args.driver}"]
+    if args.sim_drives:
+        ros += ["-p", "sim_drives:=true"]
     if args.gui:
         ros += ["-p", "sim.gui:=true"]
     if args.enable:
@@ -85,6 +92,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"holonomic-bringup: {exc}", file=sys.stderr)
         return 2
     from holonomic_bringup.base_controller_node import main as node_main
+    if args.sim_drives and args.driver not in ("odrive_can", "cia402"):
+        print("holonomic-bringup: --sim-drives needs --driver odrive_can or --driver cia402 "
+              f"(got {args.driver or 'the config default'})", file=sys.stderr)
+        return 2
     if args.record and not args.record.endswith(".mcap"):
         print(f"holonomic-bringup: --record wants a FILE.mcap, got {args.record!r}",
               file=sys.stderr)

@@ -31,7 +31,8 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from holonomic_core.driver import (DRIVER_REGISTRY, Driver, DriverError, DriverFault,
-                                   DriverState, JointReading, driver_class)
+                                   DriverState, JointReading, driver_class,
+                                   sim_drives_driver)
 from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.limits import TwistLimiter, is_finite_twist, saturate_joint_rates
 from holonomic_core.model import (RobotModel, build_model, check_no_unknown, read_params_file,
@@ -66,6 +67,9 @@ def _limit_specs() -> list[ParamSpec]:
 CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("driver", "string", "Driver backend: " + ", ".join(sorted(DRIVER_REGISTRY)) + ".",
               default="sim", choices=tuple(sorted(DRIVER_REGISTRY))),
+    ParamSpec("sim_drives", "bool",
+              "Run the CAN backend (odrive_can, cia402) against emulated drives whose motors "
+              "are the simulator's joints (holonomic-bringup --sim-drives).", default=False),
     ParamSpec("control_rate", "double", "Rate of the control loop [Hz].",
               default=200.0, minimum=1.0, maximum=1000.0),
     ParamSpec("publish_rate", "double",
@@ -208,6 +212,8 @@ def config_from_flat(flat: Mapping[str, Any], source: str = "") -> RobotConfig:
     values.update(validate(CONTROLLER_SPECS, flat))
     controller = ControllerConfig.from_values(values)
     dcls = driver_class(controller.driver)
+    if values["sim_drives"]:
+        dcls = sim_drives_driver(dcls)
     if controller.control_mode == "torque":
         if not dcls.supports_effort:
             raise ConfigError("control_mode", "torque",

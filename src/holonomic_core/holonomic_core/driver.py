@@ -238,16 +238,32 @@ DRIVER_REGISTRY: dict[str, str] = {
 }
 
 
+#: ``--sim-drives``: a function of a CAN backend class -> the driver class that
+#: runs it on emulated drives whose motors are simulated joints
+SIM_DRIVES = "holonomic_sim.sim_drives:sim_drives_driver"
+
+
+def _import(target: str, key: str, value, wanted: str):
+    """``"module:attribute"`` imported now; ConfigError(key, value, wanted) if it cannot be."""
+    module_name, _, attribute = target.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ConfigError(key, value, f"{wanted} ({module_name}: {exc})") from exc
+    return getattr(module, attribute)
+
+
+def sim_drives_driver(backend: type[Driver]) -> type[Driver]:
+    """The ``sim_drives`` driver class for ``backend`` (imported only now);
+    ConfigError for a backend that is not a CAN backend."""
+    return _import(SIM_DRIVES, "sim_drives", True,
+                   "false: the simulator is not installed")(backend)
+
+
 def driver_class(name: str) -> type[Driver]:
     """Resolve a backend name, importing its module only now."""
     try:
         target = DRIVER_REGISTRY[name]
     except KeyError:
         raise ConfigError("driver", name, f"one of {sorted(DRIVER_REGISTRY)}") from None
-    module_name, _, class_name = target.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise ConfigError("driver", name,
-                          f"a backend whose package is installed ({module_name}: {exc})") from exc
-    return getattr(module, class_name)
+    return _import(target, "driver", name, "a backend whose package is installed")

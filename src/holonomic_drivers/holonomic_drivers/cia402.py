@@ -660,6 +660,13 @@ class Cia402Driver(CanDriver):
     # -- cycle --------------------------------------------------------------------------------
     def _on_read(self) -> JointReading:
         now = time.monotonic()
+        if now - self._sync_time > self._feedback_timeout:
+            # No SYNC for longer than the PDOs may be late (the first read
+            # after configure, a caller that paused): their age says nothing
+            # about the drives, so ask again before judging them.
+            self._wait("PDOs after a pause of the control loop",
+                       lambda: self._first_not_ready(now, enabled=False))
+            now = time.monotonic()
         with self._lock:
             drives = [_Drive(**vars(d)) for d in self._drives]
         try:

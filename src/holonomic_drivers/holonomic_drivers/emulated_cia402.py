@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from typing import Protocol, Sequence
+from typing import Sequence
 
 import can
 import canopen
@@ -55,6 +55,7 @@ from holonomic_drivers.cia402_dictionary import (AXIS_OFFSET, MAX_AXES, AxisObje
                                                  SI_VELOCITY_UNITS, generic_dictionary,
                                                  integer_range, mode_bit)
 from holonomic_drivers.cia402_protocol import OpMode, State
+from holonomic_drivers.emulation import IdealMotor, Motor
 
 TWO_PI = 2.0 * math.pi
 #: SDO abort codes (CiA 301) the drive uses beyond canopen's own
@@ -64,64 +65,6 @@ ABORT_VALUE_RANGE = 0x06090030
 #: objects the drive writes itself (read-only to the master)
 _OWN_OBJECTS = frozenset((co.STATUSWORD, co.POSITION_ACTUAL, co.VELOCITY_ACTUAL,
                           co.MODES_DISPLAY, co.ERROR_CODE, co.ERROR_REGISTER))
-
-
-class Motor(Protocol):
-    """What drives a joint: motor shaft, SI units."""
-
-    def command_velocity(self, rad_per_s: float) -> None:
-        """Follow this speed [rad/s] (as the drive's velocity loop does)."""
-
-    def command_torque(self, newton_metre: float) -> None:
-        """Apply this torque [N m] (cyclic synchronous torque)."""
-
-    def position(self) -> float:
-        """Shaft angle [rad]."""
-
-    def velocity(self) -> float:
-        """Shaft speed [rad/s]."""
-
-    def advance(self, dt: float) -> None:
-        """Move on by ``dt`` [s] under the last command."""
-
-
-class IdealMotor:
-    """A motor that follows a commanded speed within ``max_acceleration``
-    [rad/s^2], and under a torque accelerates a free rotor of ``inertia``
-    [kg m^2]. Position and speed integrate exactly in each step."""
-
-    def __init__(self, max_acceleration: float = 200.0 * TWO_PI, inertia: float = 1e-4):
-        self.max_acceleration = float(max_acceleration)
-        self.inertia = float(inertia)
-        self._angle = 0.0
-        self._speed = 0.0
-        self._target = 0.0
-        self._torque: float | None = None
-
-    def command_velocity(self, rad_per_s: float) -> None:
-        self._target, self._torque = float(rad_per_s), None
-
-    def command_torque(self, newton_metre: float) -> None:
-        self._torque = float(newton_metre)
-
-    def position(self) -> float:
-        return self._angle
-
-    def velocity(self) -> float:
-        return self._speed
-
-    def advance(self, dt: float) -> None:
-        if dt <= 0.0:
-            return
-        start = self._speed
-        if self._torque is not None:
-            self._speed += self._torque / self.inertia * dt
-        else:
-            step = self.max_acceleration * dt
-            error = self._target - self._speed
-            self._speed = self._target if abs(error) <= step else \
-                self._speed + math.copysign(step, error)
-        self._angle += 0.5 * (start + self._speed) * dt
 
 
 @dataclass

@@ -11,8 +11,23 @@ into its encoder position and can be told to fail. Two ways to run them:
 * in the background: ``EmulatorThread(devices)`` does both every
   millisecond (a context manager).
 
-Motors are ideal: in velocity control the speed follows the setpoint within
-``max_acceleration``; an idle or disabled motor stops at the same rate.
+Each device drives a *motor* (constructor argument ``motor=``), anything with
+this interface, all on the motor shaft in SI units::
+
+    command_velocity(rad_per_s)    velocity setpoint of the drive's loop
+    command_torque(newton_metre)   torque setpoint (torque control)
+    position() -> rad              shaft angle (what the encoder measures)
+    velocity() -> rad/s            shaft speed
+    advance(dt)                    let dt seconds pass
+
+The device calls ``command_*`` with what its protocol state asks for (an
+idle or disabled drive commands zero speed) and ``advance`` as time passes.
+The default, :class:`IdealMotor`, is ideal: in velocity control the speed
+follows the setpoint within ``max_acceleration``; an idle or disabled motor
+stops at the same rate; in torque control it is a free inertia. With
+``holonomic-bringup --sim-drives`` the motor is a simulated joint instead
+(:mod:`holonomic_sim.joint_motor`).
+
 The emulated CiA 402 drive (built on canopen's LocalNode from the drive's
 EDS) is in :mod:`holonomic_drivers.emulated_cia402`; ``EmulatorThread``
 runs it too.
@@ -24,6 +39,7 @@ import math
 import struct
 import threading
 import time
+from typing import Protocol
 
 import can
 
@@ -31,23 +47,95 @@ from holonomic_drivers import odrive_protocol as proto
 from holonomic_drivers.odrive_protocol import AxisState, Cmd, ControlMode
 
 
+TWO_PI = 2.0 * math.pi
+
+
 def _approach(value: float, target: float, step: float) -> float:
     return target if abs(target - value) <= step else value + math.copysign(step, target - value)
 
 
-class EmulatedDevice:
-    """Common part: own bus, failure switch, the ideal motor."""
+class Motor(Protocol):
+    """What an emulated drive drives: motor shaft, SI units."""
 
-    def __init__(self, channel: str, max_acceleration: float):
-        """``max_acceleration`` [motor rev/s^2] of the ideal motor."""
-        self.bus = can.Bus(interface="virtual", channel=channel)
+    def command_velocity(self, rad_per_s: float) -> None:
+        """Follow this speed [rad/s] (as the drive's velocity loop does)."""
+
+    def command_torque(self, newton_metre: float) -> None:
+        """Apply this torque [N m] (torque control)."""
+
+    def position(self) -> float:
+        """Shaft angle [rad]."""
+
+    def velocity(self) -> float:
+        """Shaft speed [rad/s]."""
+
+    def advance(self, dt: float) -> None:
+        """Move on by ``dt`` [s] under the last command."""
+
+
+class IdealMotor:
+    """The default motor of an emulated drive (motor shaft, SI units).
+
+    Velocity control: the speed ramps to the setpoint at ``max_acceleration``
+    [rad/s^2]. Torque control: a free rotor of ``inertia`` [kg m^2]
+    accelerates at torque / inertia (no friction, no limit). Position
+    integrates the speed exactly over each step (trapezoid).
+    """
+
+    def __init__(self, max_acceleration: float = 200.0 * TWO_PI, inertia: float = 1e-4):
         self.max_acceleration = float(max_acceleration)
+        self.inertia = float(inertia)
+        self._position = 0.0
+        self._velocity = 0.0
+        self._target_velocity = 0.0
+        self._torque: float | None = None
+
+    def command_velocity(self, rad_per_s: float) -> None:
+        self._target_velocity, self._torque = float(rad_per_s), None
+
+    def command_torque(self, newton_metre: float) -> None:
+        self._torque = float(newton_metre)
+
+    def position(self) -> float:
+        return self._position
+
+    def velocity(self) -> float:
+        return self._velocity
+
+    def advance(self, dt: float) -> None:
+        if dt <= 0.0:
+            return
+        start = self._velocity
+        if self._torque is None:
+            self._velocity = _approach(self._velocity, self._target_velocity,
+                                       self.max_acceleration * dt)
+        else:
+            self._velocity += self._torque / self.inertia * dt
+        self._position += 0.5 * (start + self._velocity) * dt
+
+
+class EmulatedDevice:
+    """Common part: own bus, failure switch, the motor."""
+
+    def __init__(self, channel: str, max_acceleration: float, motor=None):
+        """``max_acceleration`` [motor rev/s^2] of the default :class:`IdealMotor`;
+        ``motor``: another motor (see the module docstring)."""
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.motor = motor if motor is not None else IdealMotor(max_acceleration * TWO_PI)
         #: no frame at all leaves the device (unplugged, dead CPU)
         self.silent = False
-        self.position_rev = 0.0
-        self.velocity_rev_per_s = 0.0
         self._last_tick: float | None = None
         self._lock = threading.RLock()
+
+    @property
+    def position_rev(self) -> float:
+        """Motor shaft position [rev]."""
+        return self.motor.position() / TWO_PI
+
+    @property
+    def velocity_rev_per_s(self) -> float:
+        """Motor shaft speed [rev/s]."""
+        return self.motor.velocity() / TWO_PI
 
     def poll(self, now: float) -> None:
         """Handle every frame waiting on the device's bus.
@@ -75,10 +163,8 @@ class EmulatedDevice:
             return
         dt = 0.0 if self._last_tick is None else now - self._last_tick
         self._last_tick = now
-        target = self.target_velocity(now)
-        self.velocity_rev_per_s = _approach(self.velocity_rev_per_s, target,
-                                            self.max_acceleration * dt)
-        self.position_rev += self.velocity_rev_per_s * dt
+        self.command_motor(now)
+        self.motor.advance(dt)
 
     def send(self, arbitration_id: int, data: bytes) -> None:
         self.bus.send(can.Message(arbitration_id=arbitration_id, data=data,
@@ -91,7 +177,8 @@ class EmulatedDevice:
     def handle(self, msg: can.Message, now: float) -> None:
         raise NotImplementedError
 
-    def target_velocity(self, now: float) -> float:
+    def command_motor(self, now: float) -> None:
+        """Give the motor what the drive's state asks for at ``now``."""
         raise NotImplementedError
 
     def cyclic(self, now: float) -> None:
@@ -99,7 +186,8 @@ class EmulatedDevice:
 
 
 class EmulatedOdriveAxis(EmulatedDevice):
-    """One ODrive axis speaking CANSimple (firmware 0.6 message layout).
+    """One ODrive axis speaking CANSimple, in the message layout and error
+    bits of ``firmware`` ("0.6" or "0.5").
 
     Failure injection: ``silent``; ``encoder_period`` (make it long: the
     axis answers late); ``inject_error(bits)`` -- a condition that disarms
@@ -109,13 +197,15 @@ class EmulatedOdriveAxis(EmulatedDevice):
 
     def __init__(self, node_id: int, channel: str, heartbeat_period: float = 0.1,
                  encoder_period: float = 0.01, max_acceleration: float = 200.0,
-                 watchdog_timeout: float = 0.0):
+                 watchdog_timeout: float = 0.0, motor=None, firmware: str = "0.6"):
         """Periods [s]; ``watchdog_timeout`` [s] > 0: no setpoint for that long
-        in closed loop -> WATCHDOG_TIMER_EXPIRED (the ODrive's axis watchdog)."""
-        super().__init__(channel, max_acceleration)
-        self._ramp = float(max_acceleration)
-        #: [kg m^2] of the free motor in torque mode
-        self.motor_inertia = 1e-4
+        in closed loop -> WATCHDOG_TIMER_EXPIRED (the ODrive's axis watchdog);
+        ``motor``: see the module docstring (default: an ideal motor that
+        ramps at ``max_acceleration`` [rev/s^2])."""
+        super().__init__(channel, max_acceleration, motor)
+        if firmware not in proto.FIRMWARES:
+            raise ValueError(f"firmware {firmware!r} not one of {proto.FIRMWARES}")
+        self.firmware = firmware
         self.node_id = node_id
         self.heartbeat_period = heartbeat_period
         self.encoder_period = encoder_period
@@ -190,31 +280,20 @@ class EmulatedOdriveAxis(EmulatedDevice):
             elif cmd == Cmd.CLEAR_ERRORS:
                 self.disarm_reason = 0
             elif cmd == Cmd.ESTOP:
-                self._disarm(0x2000000)   # ESTOP_REQUESTED
+                self._disarm(proto.ESTOP_REQUESTED[self.firmware])
         except (struct.error, ValueError):
             pass    # a real ODrive ignores malformed frames too
 
-    def target_velocity(self, now: float) -> float:
+    def command_motor(self, now: float) -> None:
+        if (self.axis_state == AxisState.CLOSED_LOOP_CONTROL and self.watchdog_timeout > 0
+                and now - self._last_input > self.watchdog_timeout):
+            self._disarm(proto.WATCHDOG_TIMER_EXPIRED[self.firmware])
         if self.axis_state != AxisState.CLOSED_LOOP_CONTROL:
-            return 0.0
-        if self.watchdog_timeout > 0 and now - self._last_input > self.watchdog_timeout:
-            self._disarm(0x1000000)       # WATCHDOG_TIMER_EXPIRED
-            return 0.0
-        if self.control_mode == ControlMode.VELOCITY_CONTROL:
-            return self.input_vel
-        # torque mode: a free motor of inertia ``motor_inertia`` accelerates
-        # at torque / inertia (toward a far target, at that rate)
-        return math.copysign(1e9, self.input_torque) if self.input_torque else \
-            self.velocity_rev_per_s
-
-    def _advance(self, now: float) -> None:
-        if (self.control_mode == ControlMode.TORQUE_CONTROL
-                and self.axis_state == AxisState.CLOSED_LOOP_CONTROL):
-            # the ideal motor's acceleration is the torque's, not a ramp's
-            self.max_acceleration = abs(self.input_torque) / self.motor_inertia / (2 * math.pi)
+            self.motor.command_velocity(0.0)
+        elif self.control_mode == ControlMode.TORQUE_CONTROL:
+            self.motor.command_torque(self.input_torque)          # [N m] at the motor
         else:
-            self.max_acceleration = self._ramp
-        super()._advance(now)
+            self.motor.command_velocity(self.input_vel * TWO_PI)  # rev/s -> rad/s
 
     def cyclic(self, now: float) -> None:
         if now >= self._next_heartbeat:
@@ -226,7 +305,8 @@ class EmulatedOdriveAxis(EmulatedDevice):
 
     def _send_heartbeat(self) -> None:
         self.send(proto.frame_id(self.node_id, Cmd.HEARTBEAT),
-                  proto.Heartbeat(self.axis_error, int(self.axis_state), 0, True).encode())
+                  proto.Heartbeat(self.axis_error, int(self.axis_state), 0, True).encode(
+                      self.firmware))
 
     def _send_estimates(self) -> None:
         self.send(proto.frame_id(self.node_id, Cmd.GET_ENCODER_ESTIMATES),

@@ -1,6 +1,7 @@
 """The ``odrive_can`` backend: ODrive motor controllers over CANSimple.
 
-One ODrive axis per joint, addressed by its CAN node id. The driver sends
+One ODrive axis per joint, addressed by its CAN node id; ``odrive_can.firmware``
+(0.5 or 0.6) selects the firmware line's heartbeat layout and error names. The driver sends
 velocity setpoints every cycle and takes positions and speeds
 from the encoder estimates that each axis broadcasts (``encoder_msg_rate_ms``
 on the ODrive, 10 ms by default) or, with ``odrive_can.poll_encoders``,
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from holonomic_core.driver import DriverCommunicationError, DriverFault, JointReading
-from holonomic_core.schema import ParamSpec
+from holonomic_core.schema import ConfigError, ParamSpec
 from holonomic_drivers import odrive_protocol as proto
 from holonomic_drivers.can_link import CanDriver, bus_specs, joint_map_specs, open_bus
 from holonomic_drivers.odrive_protocol import AxisState, Cmd, ControlMode, InputMode
@@ -73,6 +74,13 @@ class OdriveCanDriver(CanDriver):
         self._startup_timeout = float(params[f"{PREFIX}.startup_timeout"])
         self._input_mode = _INPUT_MODES[params[f"{PREFIX}.input_mode"]]
         self._poll = bool(params[f"{PREFIX}.poll_encoders"])
+        self.firmware = params[f"{PREFIX}.firmware"]
+        highest = proto.max_node_id(self.firmware)
+        for joint, node in zip(self.joints.joint_names, self.joints.node_ids):
+            if node > highest:
+                raise ConfigError(f"{PREFIX}.joints.{joint}.node_id", node,
+                                  f"0..{highest} on firmware {self.firmware} (0x3F is the "
+                                  "broadcast address of 0.6.x)")
         self._bus = None
         #: the control mode the axes were last told (per axis)
         self._mode = [ControlMode.VELOCITY_CONTROL] * len(self._axes)
@@ -98,6 +106,12 @@ class OdriveCanDriver(CanDriver):
                       "ODrive input mode: passthrough (the controller already limits "
                       "acceleration) or vel_ramp (the ODrive's own ramp on top).",
                       default="passthrough", choices=tuple(_INPUT_MODES)),
+            ParamSpec(f"{PREFIX}.firmware", "string",
+                      "ODrive firmware line: 0.6 (ODrive Pro, S1, Micro) or 0.5 (ODrive v3.x). "
+                      "Selects the heartbeat layout (0.5: motor/encoder/controller error "
+                      "flags), the names of the axis error bits (the same bit means different "
+                      "things on the two lines) and the node id range (0.6: 0..62).",
+                      default="0.6", choices=proto.FIRMWARES),
             ParamSpec(f"{PREFIX}.poll_encoders", "bool",
                       "Request the encoder estimates every cycle (remote frame) instead of "
                       "relying on the axes' cyclic messages.", default=False),
@@ -141,7 +155,7 @@ class OdriveCanDriver(CanDriver):
         seen = [a.heartbeats for a in self._axes]
         self._mode = [ControlMode.VELOCITY_CONTROL] * len(self._axes)
         for node in self.joints.node_ids:
-            self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors())
+            self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors(firmware=self.firmware))
             self._send(node, Cmd.SET_CONTROLLER_MODE, proto.set_controller_mode(
                 ControlMode.VELOCITY_CONTROL, self._input_mode))
             self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
@@ -151,21 +165,21 @@ class OdriveCanDriver(CanDriver):
         while True:
             self._drain()
             waiting = [i for i, a in enumerate(self._axes) if not (
-                a.heartbeats > seen[i] and a.heartbeat.axis_error == 0
+                a.heartbeats > seen[i] and not a.heartbeat.faulted
                 and a.heartbeat.axis_state == AxisState.CLOSED_LOOP_CONTROL)]
             if not waiting:
                 return
             # an axis that still reports an error after Clear_Errors will not
             # arm: say so now rather than at the timeout
             faulty = [i for i in waiting if self._axes[i].heartbeats > seen[i]
-                      and self._axes[i].heartbeat.axis_error]
+                      and self._axes[i].heartbeat.faulted]
             if faulty or time.monotonic() > deadline:
                 self._idle_all()
                 i = (faulty or waiting)[0]
                 hb = self._axes[i].heartbeat
                 why = ("no heartbeat since the request" if self._axes[i].heartbeats == seen[i]
                        else f"state {_state_name(hb.axis_state)}, error "
-                            f"0x{hb.axis_error:X} ({proto.error_names(hb.axis_error)})")
+                            f"{hb.describe(self.firmware)}")
                 raise DriverFault(f"did not enter closed-loop control ({why}); motors left idle",
                                   self.devices[i])
             time.sleep(0.002)
@@ -195,9 +209,8 @@ class OdriveCanDriver(CanDriver):
                     f"encoder estimates late: last one {age * 1e3:.0f} ms ago (limit "
                     f"{self._feedback_timeout * 1e3:.0f} ms)", device)
             hb = axis.heartbeat
-            if armed and hb.axis_error:
-                raise DriverFault(f"axis error 0x{hb.axis_error:X} "
-                                  f"({proto.error_names(hb.axis_error)})", device)
+            if armed and hb.faulted:
+                raise DriverFault(f"axis error {hb.describe(self.firmware)}", device)
             if armed and hb.axis_state != AxisState.CLOSED_LOOP_CONTROL:
                 raise DriverFault(f"left closed-loop control (now "
                                   f"{_state_name(hb.axis_state)})", device)
@@ -244,7 +257,7 @@ class OdriveCanDriver(CanDriver):
             out[self.joints.joint_names[i]] = (
                 f"node {self.joints.node_ids[i]}: no heartbeat" if hb is None else
                 f"node {self.joints.node_ids[i]}: {_state_name(hb.axis_state)}, error "
-                f"{proto.error_names(hb.axis_error)}, heartbeat "
+                f"{hb.describe(self.firmware)}, heartbeat "
                 f"{(now - axis.heartbeat_time) * 1e3:.0f} ms ago")
         return out
 
@@ -282,7 +295,7 @@ class OdriveCanDriver(CanDriver):
         axis = self._axes[i]
         try:
             if cmd == Cmd.HEARTBEAT:
-                axis.heartbeat = proto.Heartbeat.decode(bytes(msg.data))
+                axis.heartbeat = proto.Heartbeat.decode(bytes(msg.data), self.firmware)
                 axis.heartbeat_time = now
                 axis.heartbeats += 1
             elif cmd == Cmd.GET_ENCODER_ESTIMATES:

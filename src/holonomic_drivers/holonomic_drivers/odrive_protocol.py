@@ -1,8 +1,24 @@
-"""ODrive CANSimple protocol (firmware 0.6): frame ids and payloads.
+"""ODrive CANSimple protocol (firmware 0.5.x and 0.6.x): frame ids and payloads.
 
 Every frame has an 11-bit id ``node_id << 5 | cmd_id`` and a little-endian
 payload. Pure functions, no bus: the driver and the emulated ODrive both use
-them, and the protocol tests check them byte for byte.
+them, and the protocol tests check them against ODrive's CANSimple DBC files
+(``odrive-cansimple-0.5.6.dbc`` and ``-0.6.10.dbc``).
+
+What differs between the firmware lines, for the messages used here:
+
+=================== ============================== ===================================
+                    0.5.x (ODrive v3.x)            0.6.x (ODrive Pro, S1, Micro)
+=================== ============================== ===================================
+node ids            0..63                          0..62 (0x3F: broadcast / unaddressed)
+Heartbeat bytes 5-7 motor / encoder / controller   procedure result (byte 5),
+                    error flags (bit 40, 48, 56),  trajectory done (bit 48)
+                    trajectory done (bit 63)
+Axis_Error bits     AxisError of 0.5.x:            ODrive.Error: 0x40 MISSING_INPUT,
+                    0x40 MOTOR_FAILED, 0x800       0x1000000 WATCHDOG_TIMER_EXPIRED, ...
+                    WATCHDOG_TIMER_EXPIRED, ...
+Clear_Errors        no payload                     1 byte (Identify)
+=================== ============================== ===================================
 
 Only the messages this stack uses are here; see the ODrive documentation
 ("CAN Protocol") for the rest.
@@ -16,6 +32,16 @@ import struct
 from dataclasses import dataclass
 
 MAX_NODE_ID = 0x3F      # 6 bits of node id in an 11-bit frame id
+#: firmware lines whose CANSimple layout this module speaks
+FIRMWARES = ("0.5", "0.6")
+#: 0.6.x: node id 0x3F addresses every ODrive (discovery, broadcast), so an
+#: axis can only be given 0..0x3E
+BROADCAST_NODE_ID = 0x3F
+
+
+def max_node_id(firmware: str) -> int:
+    """Highest node id an axis can have on ``firmware`` ("0.5" or "0.6")."""
+    return MAX_NODE_ID if firmware == "0.5" else BROADCAST_NODE_ID - 1
 
 
 class Cmd(enum.IntEnum):
@@ -56,7 +82,7 @@ class InputMode(enum.IntEnum):
     VEL_RAMP = 2
 
 
-#: ODrive.Error bits (firmware 0.6) named in messages
+#: ODrive.Error bits (firmware 0.6.x) named in messages
 AXIS_ERRORS = {
     0x1: "INITIALIZING", 0x2: "SYSTEM_LEVEL", 0x4: "TIMING_ERROR", 0x8: "MISSING_ESTIMATE",
     0x10: "BAD_CONFIG", 0x20: "DRV_FAULT", 0x40: "MISSING_INPUT", 0x100: "DC_BUS_OVER_VOLTAGE",
@@ -68,11 +94,25 @@ AXIS_ERRORS = {
     0x10000000: "THERMISTOR_DISCONNECTED", 0x40000000: "CALIBRATION_ERROR",
 }
 
+#: Axis.Error bits of firmware 0.5.x (the same bit means something else on 0.6)
+AXIS_ERRORS_0_5 = {
+    0x1: "INVALID_STATE", 0x40: "MOTOR_FAILED", 0x80: "SENSORLESS_ESTIMATOR_FAILED",
+    0x100: "ENCODER_FAILED", 0x200: "CONTROLLER_FAILED", 0x800: "WATCHDOG_TIMER_EXPIRED",
+    0x1000: "MIN_ENDSTOP_PRESSED", 0x2000: "MAX_ENDSTOP_PRESSED", 0x4000: "ESTOP_REQUESTED",
+    0x20000: "HOMING_WITHOUT_ENDSTOP", 0x40000: "OVER_TEMP", 0x80000: "UNKNOWN_POSITION",
+}
 
-def error_names(bits: int) -> str:
-    """``0x20`` -> ``'DRV_FAULT'``; unknown bits in hex."""
-    names = [name for bit, name in AXIS_ERRORS.items() if bits & bit]
-    rest = bits & ~sum(AXIS_ERRORS)
+#: per firmware: the error bits the emulated axis raises for these conditions
+WATCHDOG_TIMER_EXPIRED = {"0.5": 0x800, "0.6": 0x1000000}
+ESTOP_REQUESTED = {"0.5": 0x4000, "0.6": 0x2000000}
+
+
+def error_names(bits: int, firmware: str = "0.6") -> str:
+    """``0x20`` -> ``'DRV_FAULT'`` (names of ``firmware``'s axis error bits);
+    unknown bits in hex."""
+    table = AXIS_ERRORS_0_5 if firmware == "0.5" else AXIS_ERRORS
+    names = [name for bit, name in table.items() if bits & bit]
+    rest = bits & ~sum(table)
     if rest:
         names.append(f"0x{rest:X}")
     return "|".join(names) or "none"
@@ -110,28 +150,59 @@ def set_limits(vel_limit_rev_per_s: float, current_limit: float) -> bytes:
     return struct.pack("<ff", vel_limit_rev_per_s, current_limit)
 
 
-def clear_errors(identify: bool = False) -> bytes:
-    return struct.pack("<B", int(identify))
+def clear_errors(identify: bool = False, firmware: str = "0.6") -> bytes:
+    """0.6.x: one byte, Identify (blink the LED); 0.5.x: no payload."""
+    return b"" if firmware == "0.5" else struct.pack("<B", int(identify))
 
 
 # -- axis -> host ----------------------------------------------------------------------
+#: 0.5.x heartbeat flags: (name, bit of the 64-bit payload)
+_FLAGS_0_5 = (("motor", 40), ("encoder", 48), ("controller", 56))
+
+
 @dataclass(frozen=True)
 class Heartbeat:
+    """Cyclic status of one axis. ``procedure_result`` exists on 0.6.x only;
+    ``error_flags`` on 0.5.x only: the names of the sub-objects (motor,
+    encoder, controller) that report an error of their own."""
+
     axis_error: int
     axis_state: int
     procedure_result: int
     trajectory_done: bool
+    error_flags: tuple[str, ...] = ()
 
-    def encode(self) -> bytes:
+    @property
+    def faulted(self) -> bool:
+        return bool(self.axis_error or self.error_flags)
+
+    def describe(self, firmware: str = "0.6") -> str:
+        """``0x40 (MOTOR_FAILED), motor error flag`` for messages."""
+        text = f"0x{self.axis_error:X} ({error_names(self.axis_error, firmware)})"
+        if self.error_flags:
+            text += ", " + " ".join(self.error_flags) + " error flag"
+        return text
+
+    def encode(self, firmware: str = "0.6") -> bytes:
+        if firmware == "0.5":
+            bits = sum(1 << bit for name, bit in _FLAGS_0_5 if name in self.error_flags)
+            bits |= int(self.trajectory_done) << 63
+            return struct.pack("<IB", self.axis_error, self.axis_state) + \
+                (bits >> 40).to_bytes(3, "little")
         return struct.pack("<IBBBx", self.axis_error, self.axis_state, self.procedure_result,
                            int(self.trajectory_done))
 
     @classmethod
-    def decode(cls, data: bytes) -> "Heartbeat":
+    def decode(cls, data: bytes, firmware: str = "0.6") -> "Heartbeat":
         if len(data) < 7:
             raise ValueError(f"heartbeat of {len(data)} bytes (7 or 8 expected)")
-        error, state, result, done = struct.unpack_from("<IBBB", data)
-        return cls(error, state, result, bool(done))
+        error, state = struct.unpack_from("<IB", data)
+        if firmware == "0.5":
+            bits = int.from_bytes(bytes(data[:8]).ljust(8, b"\0"), "little")
+            flags = tuple(name for name, bit in _FLAGS_0_5 if bits >> bit & 1)
+            return cls(error, state, 0, bool(bits >> 63 & 1), flags)
+        result, done = data[5], data[6]
+        return cls(error, state, result, bool(done & 1))
 
 
 @dataclass(frozen=True)
