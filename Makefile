@@ -1,8 +1,13 @@
 # The two commands of the README. Both set everything up themselves
 # (scripts/setup.sh is idempotent and quick when nothing changed).
+# PYTHON=python3.12 chooses the interpreter of a new .venv; VENV=... WS=...
+# put the virtual environment and the colcon workspace elsewhere (e.g. a
+# second Python next to the first, as .ci/run does).
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
-ENV := . ros2_ws/env.sh &&
+VENV ?= .venv
+WS ?= ros2_ws
+ENV := . $(WS)/env.sh &&
 
 .PHONY: help setup demo test bench clean
 
@@ -10,11 +15,11 @@ help:
 	@echo "make demo   set up, then drive the simulated HAMR headless; prints a table, writes a plot"
 	@echo "make test   set up, then run the whole test suite"
 	@echo "make bench  set up, then run the benchmarks (about 8 min); writes docs/benchmarks.md"
-	@echo "make setup  only set up .venv/ and build ros2_ws/"
-	@echo "make clean  remove .venv/, ros2_ws/ and out/"
+	@echo "make setup  only set up $(VENV)/ and build $(WS)/ (PYTHON=python3.12 for another Python)"
+	@echo "make clean  remove $(VENV)/, $(WS)/ and out/"
 
 setup:
-	@scripts/setup.sh
+	@VENV="$(VENV)" WS="$(WS)" scripts/setup.sh
 
 demo: setup
 	@$(ENV) holonomic-demo --robot $(if $(ROBOT),$(ROBOT),hamr) --out out
@@ -26,4 +31,4 @@ bench: setup
 	@$(ENV) python bench/run.py $(BENCH_ARGS)
 
 clean:
-	rm -rf .venv ros2_ws out .pytest_cache .hypothesis
+	rm -rf $(VENV) $(WS) out .pytest_cache .hypothesis
