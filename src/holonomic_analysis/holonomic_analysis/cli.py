@@ -104,7 +104,14 @@ def run(args: argparse.Namespace, out=None) -> dict:
     from holonomic_core.model import load_model
     from holonomic_analysis import holonomicity, isotropy, mobility
 
+    from holonomic_core.controller import load_config
     overrides = dict(args.param)
+    # The whole configuration, so that a misspelt -p or --sweep key is named
+    # (load_model alone reads only the geometry and would ignore it).
+    load_config(args.robot, overrides)
+    for text in args.sweep:
+        key, values = mobility.parse_sweep(text)
+        load_config(args.robot, {**overrides, key: float(values[0])})
     model = load_model(args.robot, overrides)
 
     def positions_of(m):

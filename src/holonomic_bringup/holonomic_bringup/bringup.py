@@ -72,6 +72,16 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
             read_params_file(Path(path))
         except ConfigError as exc:
             parser.error(f"--params-file {path}: expected {exc.allowed}")
+    if args.record:
+        if not args.record.endswith(".mcap"):
+            parser.error(f"--record wants a FILE.mcap, got {args.record!r}")
+        folder = Path(args.record).absolute().parent
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            parser.error(f"--record: cannot create the folder {str(folder)!r}: {exc.strerror}")
+        if not os.access(folder, os.W_OK):
+            parser.error(f"--record: the folder {str(folder)!r} is not writable")
     if args.gui and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         parser.error("--gui needs a display (DISPLAY is not set); run headless without --gui")
 
@@ -114,10 +124,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"holonomic-bringup: {exc}", file=sys.stderr)
         return 2
     from holonomic_bringup.base_controller_node import main as node_main
-    if args.record and not args.record.endswith(".mcap"):
-        print(f"holonomic-bringup: --record wants a FILE.mcap, got {args.record!r}",
-              file=sys.stderr)
-        return 2
     if args.fleet is not None:
         problem = ("N must be between 1 and 100" if not 1 <= args.fleet <= 100 else
                    "is simulation only (--driver sim)" if args.driver not in (None, "sim") else
