@@ -107,7 +107,8 @@ def plot(path: Path, client, robot: str, marks) -> None:
 
     truth = np.array([s.pose for s in client.truth])
     odom = np.array([s.pose for s in client.odom])
-    fig, (ax, axv) = plt.subplots(1, 2, figsize=(14, 6.5), width_ratios=(1, 1.25))
+    # path on top (its own aspect ratio, the full width), twist below
+    fig, (ax, axv) = plt.subplots(2, 1, figsize=(11, 11), height_ratios=(1.1, 1))
     step = max(1, len(truth) // 40)
     ax.quiver(truth[::step, 0], truth[::step, 1], np.cos(truth[::step, 2]),
               np.sin(truth[::step, 2]), color="0.65", scale=30, width=0.003, zorder=1,
@@ -137,7 +138,8 @@ def plot(path: Path, client, robot: str, marks) -> None:
     handles, _ = ax.get_legend_handles_labels()
     handles.append(Line2D([], [], marker="o", ls="", color="tab:blue",
                           label="start of segment n (table)"))
-    ax.legend(handles=handles, loc="best", fontsize=8)
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
+              borderaxespad=0.0)
 
     t_truth = np.array([s.t for s in client.truth])
     tw = np.array([s.twist for s in client.truth])
@@ -154,11 +156,11 @@ def plot(path: Path, client, robot: str, marks) -> None:
     axv.set_xlabel("time [s]")
     axv.set_ylabel("body twist in base_link")
     axv.set_title("ground-truth body twist; shaded: segment n of the table")
-    axv.legend(loc="lower left", fontsize=8)
+    axv.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
     axv.grid(True, alpha=0.3)
     key = "   ".join(f"{i} {name}" for i, (name, _, _, _) in enumerate(marks, 1))
-    fig.text(0.5, 0.01, "segments: " + key, ha="center", va="bottom", fontsize=8.5, wrap=True)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.text(0.5, 0.005, "segments: " + key, ha="center", va="bottom", fontsize=8.5, wrap=True)
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
