@@ -25,7 +25,16 @@ def usage_error(prog: str, message: str) -> NoReturn:
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse with a one-line error (``prog: message (see prog --help)``)."""
+    """argparse with a one-line error (``prog: message (see prog --help)``).
+
+    The description and epilog may be docstring text: their reST literals
+    (double backquotes) are shown plain in ``--help``."""
+
+    def __init__(self, *args, **kwargs):
+        for key in ("description", "epilog"):
+            if kwargs.get(key):
+                kwargs[key] = kwargs[key].replace("``", "")
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         usage_error(self.prog, f"{message} (see {self.prog} --help)")
