@@ -3,8 +3,6 @@ pseudo-terminal, publishing to this process and driving a simulated HAMR."""
 
 from __future__ import annotations
 
-import shutil
-import subprocess
 import time
 
 import numpy as np

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from holonomic_bringup.process_guard import STOP, install_signal_handlers
-from holonomic_core.command_line import ArgumentParser, ShowDefaults
+from holonomic_core.command_line import ArgumentParser, ShowDefaults, robot_config
 
 
 @dataclass(frozen=True)
@@ -197,18 +197,11 @@ def _check(robot: subprocess.Popen, log_path: Path) -> None:
 def parse_args(argv):
     parser = ArgumentParser(prog="holonomic-demo", description=__doc__.split("\n\n")[0],
                             formatter_class=ShowDefaults)
-    parser.add_argument("--robot", default="hamr", help="config name (hamr, xr4000, comr3) "
-                                                        "or a robot YAML")
+    parser.add_argument("--robot", type=robot_config, default="hamr",
+                        help="config name (hamr, xr4000, comr3) or a robot YAML")
     parser.add_argument("--out", default="out", type=Path,
                         help="folder for the plot and the robot's log")
     args = parser.parse_args(argv)
-    from holonomic_core.controller import load_config
-    from holonomic_core.schema import ConfigError
-    try:
-        # the robot's whole configuration, checked before anything starts
-        load_config(args.robot)
-    except ConfigError as exc:
-        parser.error(f"--robot: {exc}")
     try:
         args.out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

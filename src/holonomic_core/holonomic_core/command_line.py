@@ -80,3 +80,33 @@ def number(low: float | None = None, high: float | None = None, *, strict_low: b
 
     parse.__name__ = kind   # argparse names the type in some messages
     return parse
+
+
+def output_file(text: str) -> str:
+    """An argparse ``type``: a file path the program can write at its end --
+    checked now, before minutes of work, not when the results are ready."""
+    from pathlib import Path
+    import os
+
+    path = Path(text)
+    folder = path.absolute().parent
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"cannot write {text!r}: it is a folder")
+    if not folder.is_dir():
+        raise argparse.ArgumentTypeError(f"cannot write {text!r}: no folder {str(folder)!r}")
+    if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise argparse.ArgumentTypeError(f"cannot write {text!r}: permission denied")
+    return text
+
+
+def robot_config(text: str) -> str:
+    """An argparse ``type``: a robot config name or YAML path whose whole
+    configuration is valid (the config's own one-line error otherwise)."""
+    from holonomic_core.controller import load_config
+    from holonomic_core.schema import ConfigError
+
+    try:
+        load_config(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text

@@ -34,7 +34,8 @@ from holonomic_core.controller import BaseController, load_config
 from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.loop import ManualClock
 from holonomic_core.odometry import Odometry, wrap_angle
-from holonomic_core.command_line import ArgumentParser, ShowDefaults, number
+from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
+                                         robot_config)
 from holonomic_core.schema import ConfigError
 
 #: slip conditions: name -> simulator overrides (per-wheel friction spread is
@@ -172,7 +173,8 @@ def summarize(trials: list[Trial]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(prog="holonomic-odometry-experiment", formatter_class=ShowDefaults,
                             description=__doc__.split("\n\n")[0])
-    parser.add_argument("--robot", default="xr4000", help="config name or YAML")
+    parser.add_argument("--robot", type=robot_config, default="xr4000",
+                        help="config name or YAML")
     parser.add_argument("--seeds", type=number(1, 10000, integer=True), default=20,
                         help="random runs per condition")
     parser.add_argument("--duration", type=number(0.0, 3600.0, strict_low=True, unit="s"),
@@ -186,18 +188,9 @@ def main(argv: list[str] | None = None) -> int:
                         metavar="|".join(CONDITION_KEYS),
                         help="slip condition(s), repeatable (default: all): "
                              + "; ".join(f"{k} = {v}" for k, v in CONDITION_KEYS.items()))
-    parser.add_argument("--json", metavar="FILE", help="write every trial to FILE")
+    parser.add_argument("--json", type=output_file, metavar="FILE",
+                        help="write every trial to FILE")
     args = parser.parse_args(argv)
-    try:
-        load_config(args.robot)
-    except ConfigError as exc:
-        parser.error(f"--robot: {exc}")
-    json_out = None
-    if args.json:
-        try:    # before minutes of simulation, not after
-            json_out = open(args.json, "w")
-        except OSError as exc:
-            parser.error(f"--json: cannot write {args.json!r}: {exc.strerror}")
     trials = []
     for condition in args.condition or list(CONDITIONS):
         for seed in range(args.seeds):
@@ -212,9 +205,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{condition:26s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
                   f"({trial.seconds:.1f} s)", file=sys.stderr, flush=True)
     print(summarize(trials))
-    if json_out is not None:
-        with json_out:
-            json.dump([t.__dict__ for t in trials], json_out, indent=1)
+    if args.json:
+        with open(args.json, "w") as handle:
+            json.dump([t.__dict__ for t in trials], handle, indent=1)
     return 0
 
 

@@ -24,10 +24,10 @@ import sys
 import numpy as np
 import pybullet as pb
 
-from holonomic_core.command_line import ArgumentParser, ShowDefaults, number
+from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
+                                         robot_config)
 from holonomic_core.controller import BaseController, load_config
 from holonomic_core.loop import ManualClock
-from holonomic_core.schema import ConfigError
 from holonomic_core.odometry import wrap_angle
 
 
@@ -188,24 +188,17 @@ def table(rows) -> str:
 def main(argv=None) -> int:
     parser = ArgumentParser(prog="holonomic-torque-experiment", formatter_class=ShowDefaults,
                             description=__doc__.split("\n\n")[0])
-    parser.add_argument("--robot", default="xr4000", help="a PCV config name or YAML")
+    parser.add_argument("--robot", type=robot_config, default="xr4000",
+                        help="a PCV config name or YAML")
     parser.add_argument("--friction", type=number(0.0, 10.0, strict_low=True), default=1.0,
                         help="wheel friction coefficient")
-    parser.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    parser.add_argument("--markdown", type=output_file, metavar="FILE",
+                        help="also write the table to FILE")
     args = parser.parse_args(argv)
-    try:
-        cfg = load_config(args.robot)
-    except ConfigError as exc:
-        parser.error(f"--robot: {exc}")
-    if cfg.model.kind != "pcv":
-        parser.error(f"--robot: {args.robot} is a {cfg.model.kind}; the experiment needs a "
+    kind = load_config(args.robot).model.kind
+    if kind != "pcv":
+        parser.error(f"--robot: {args.robot} is a {kind}; the experiment needs a "
                      "powered-caster vehicle (pcv), e.g. xr4000 or comr3")
-    markdown = None
-    if args.markdown:
-        try:    # before minutes of simulation, not after
-            markdown = open(args.markdown, "w")
-        except OSError as exc:
-            parser.error(f"--markdown: cannot write {args.markdown!r}: {exc.strerror}")
     rows = []
     for trajectory in TRAJECTORIES:
         for mode in MODES:
@@ -213,9 +206,9 @@ def main(argv=None) -> int:
             print(f"{trajectory:13s} {mode:17s} done", file=sys.stderr, flush=True)
     text = table(rows)
     print(text)
-    if markdown is not None:
-        with markdown:
-            markdown.write(text + "\n")
+    if args.markdown:
+        with open(args.markdown, "w") as handle:
+            handle.write(text + "\n")
     return 0
 
 
