@@ -71,7 +71,8 @@ elif [[ -n "$PYTHON_FROM_USER" ]] && WANT="$(resolve_python "$PYTHON")" \
     fail "$VENV is Python $(version_of "$VENV/bin/python"), PYTHON=$PYTHON is $(version_of "$WANT"): \
 run \`make clean\` first, or give the other Python its own VENV=... WS=..."
 fi
-REQ_HASH="$(hash_of "$ROOT/requirements.txt")-py$(version_of "$VENV/bin/python")"
+# content and interpreter, not the checkout's path (a venv may serve a copy)
+REQ_HASH="$(cd "$ROOT" && hash_of requirements.txt)-py$(version_of "$VENV/bin/python")"
 if [[ $FORCE == 1 || "$(cat "$VENV/.requirements.sha256" 2>/dev/null)" != "$REQ_HASH" ]]; then
     rm -f "$VENV/.requirements.sha256" "$WS/.build.sha256"
     log "installing pinned dependencies into $VENV (about a minute; on Python 3.12 and 3.13" \
@@ -87,26 +88,8 @@ fi
 # -- 2. CMake export files of the ROS wheels ----------------------------------
 # On every run (idempotent, a fraction of a second), so that no interrupted or
 # failed run can leave an unfixed file behind for the next one to skip.
-"$VENV/bin/python" - "$VENV" <<'PY' || fail "step 2 (pointing the ROS wheels' CMake export files at $VENV/bin/python)"
-import pathlib, re, sys, sysconfig
-import numpy
-venv = pathlib.Path(sys.argv[1])
-py_inc = sysconfig.get_paths()["include"]
-np_inc = numpy.get_include()
-# The wheel build machine's paths: /opt/python/cpXY-cpXY/include/pythonX.Y
-# (manylinux images, any version) and any .../site-packages/numpy/{_core,core}/include.
-PYTHON_INCLUDE = re.compile(r"/opt/python/cp\d+-cp\d+t?/include/python\d+\.\d+t?")
-NUMPY_INCLUDE = re.compile(r"[^\";]*/site-packages/numpy/(?:_core|core)/include")
-fixed = 0
-for path in (venv / "share").rglob("*Export.cmake"):
-    text = path.read_text()
-    new = NUMPY_INCLUDE.sub(lambda m: np_inc, PYTHON_INCLUDE.sub(lambda m: py_inc, text))
-    if new != text:
-        path.write_text(new)
-        fixed += 1
-if fixed:
-    print(f"setup: pointed {fixed} CMake export file(s) at this interpreter", file=sys.stderr)
-PY
+"$VENV/bin/python" "$ROOT/scripts/fix_cmake_exports.py" "$VENV" \
+    || fail "step 2 (pointing the ROS wheels' CMake export files at $VENV/bin/python)"
 
 # -- 3. colcon build ------------------------------------------------------------
 export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
@@ -138,14 +121,19 @@ if [[ $FORCE == 1 || "$(cat "$WS/.build.sha256" 2>/dev/null)" != "$BUILD_HASH" |
         # colcon's summary names the failed packages ("Failed   <<< tf2_msgs");
         # each one's own log holds the compiler's or CMake's words.
         failed=$(sed -n 's/^Failed *<<< *\([^ ]*\).*/\1/p' "$WS/colcon_build.log")
+        shown=0
         for pkg in $failed; do
             pkg_log="$WS/log/latest_build/$pkg/stdout_stderr.log"
-            [[ -f "$pkg_log" ]] || continue
-            log "the end of $pkg_log:"
+            [[ -s "$pkg_log" ]] || continue
+            log "the lines that matter in $pkg_log:"
             { grep -n -A4 -E 'CMake Error|[Ee]rror:|Traceback' "$pkg_log" | head -n 40 \
                 || tail -n 25 "$pkg_log"; } | sed 's/^/    /' >&2
+            shown=1
         done
-        [[ -n "$failed" ]] || tail -n 25 "$WS/colcon_build.log" | sed 's/^/    /' >&2
+        if [[ $shown == 0 ]]; then     # colcon itself failed (e.g. a missing dependency)
+            log "the end of $WS/colcon_build.log:"
+            tail -n 25 "$WS/colcon_build.log" | sed 's/^/    /' >&2
+        fi
         fail "step 3 (colcon build of src/)${failed:+ in package(s): $failed}; full logs in $WS/log/latest_build"
     fi
     echo "$BUILD_HASH" > "$WS/.build.sha256"
@@ -205,10 +193,13 @@ done
 # The workspace's Python packages on the venv's own path (a .pth file), so that
 # `$VENV/bin/python -c "from holonomic_core.model import load_model"` works with
 # nothing sourced. The folders are the ones colcon's environment puts on
-# PYTHONPATH (with --symlink-install: build/<pkg>, whose package is a symlink to
-# src/). Programs that use ROS still need env.sh (the wrappers source it).
+# PYTHONPATH under build/ (with --symlink-install: build/<pkg>, whose package is
+# a symlink to src/) -- the ament_python packages only: tf2_msgs needs its
+# libraries on LD_LIBRARY_PATH, and a venv must not take a workspace's message
+# package for the system's. Programs that use ROS still need env.sh (the
+# wrappers source it).
 SITE="$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
-(set +u; unset PYTHONPATH; . "$WS/env.sh"; tr ':' '\n' <<<"${PYTHONPATH:-}") | grep "^$WS/" \
+(set +u; unset PYTHONPATH; . "$WS/env.sh"; tr ':' '\n' <<<"${PYTHONPATH:-}") | grep "^$WS/build/" \
     > "$SITE/holonomic_workspace.pth.tmp" && mv "$SITE/holonomic_workspace.pth.tmp" "$SITE/holonomic_workspace.pth" \
     || fail "step 4 (writing $SITE/holonomic_workspace.pth)"
 log "ready (source ${WS#"$ROOT"/}/env.sh to use the workspace from a shell)"
