@@ -146,14 +146,24 @@ def validate(specs: Iterable[ParamSpec], flat: Mapping[str, Any]) -> dict[str, A
             # A required key that is missing is usually a misspelt one: name
             # the misspelling as written (``ddrot.turet_offset``), not only
             # the key it should have been.
-            strangers = [k for k in flat if k not in names]
-            typo = difflib.get_close_matches(spec.name, strangers, n=1, cutoff=0.8)
+            typo = [k for k in flat if k not in names and _misspelt(k, spec.name)]
             if typo:
                 raise unknown_key_error(typo[0], flat[typo[0]], names)
             raise ConfigError(spec.name, "<missing>", spec.allowed() + " (required)")
         else:
             out[spec.name] = spec.default
     return out
+
+
+def _misspelt(written: str, meant: str) -> bool:
+    """``written`` is ``meant`` with one dotted component misspelt
+    (``ddrot.turet_offset``, ``ddrott.wheel_radius``) -- not another
+    section's key of the same name (``cia402.joints.J.node_id`` is no typo of
+    ``odrive_can.joints.J.node_id``)."""
+    a, b = written.split("."), meant.split(".")
+    differ = [(x, y) for x, y in zip(a, b) if x != y]
+    return len(a) == len(b) and len(differ) == 1 and \
+        difflib.SequenceMatcher(None, *differ[0]).ratio() >= 0.75
 
 
 def unknown_key_error(key: str, value: Any, names: Iterable[str]) -> ConfigError:
