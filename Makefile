@@ -1,29 +1,35 @@
 # The two commands of the README. Both set everything up themselves
 # (scripts/setup.sh is idempotent and quick when nothing changed).
+# PYTHON=python3.12 chooses the interpreter of a new .venv; VENV=... WS=...
+# put the virtual environment and the colcon workspace elsewhere (e.g. a
+# second Python next to the first, as .ci/run does); TESTS=... runs a subset.
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
-ENV := . ros2_ws/env.sh &&
+VENV ?= .venv
+WS ?= ros2_ws
+TESTS ?= tests
+ENV := . $(WS)/env.sh &&
 
 .PHONY: help setup demo test bench clean
 
 help:
 	@echo "make demo   set up, then drive the simulated HAMR headless; prints a table, writes a plot"
 	@echo "make test   set up, then run the whole test suite"
-	@echo "make bench  set up, then run the benchmarks (about 8 min); writes docs/benchmarks.md"
-	@echo "make setup  only set up .venv/ and build ros2_ws/"
-	@echo "make clean  remove .venv/, ros2_ws/ and out/"
+	@echo "make bench  set up, then run the benchmarks (about 6 min); writes docs/benchmarks.md"
+	@echo "make setup  only set up $(VENV)/ and build $(WS)/ (PYTHON=python3.12 for another Python)"
+	@echo "make clean  remove $(VENV)/, $(WS)/ and out/"
 
 setup:
-	@scripts/setup.sh
+	@VENV="$(VENV)" WS="$(WS)" scripts/setup.sh
 
 demo: setup
 	@$(ENV) holonomic-demo --robot $(if $(ROBOT),$(ROBOT),hamr) --out out
 
 test: setup
-	@$(ENV) python -m pytest tests -q $(PYTEST_ARGS)
+	@$(ENV) python -m pytest $(TESTS) -q $(PYTEST_ARGS)
 
 bench: setup
 	@$(ENV) python bench/run.py $(BENCH_ARGS)
 
 clean:
-	rm -rf .venv ros2_ws out .pytest_cache .hypothesis
+	rm -rf $(VENV) $(WS) out .pytest_cache .hypothesis

@@ -73,6 +73,14 @@ CASES = [
     ("missing joint limit of a caster",
      mutate_xr(r"^\s*rear_left_steer_joint: .*\n", ""),
      "joints.rear_left_steer_joint.max_velocity", "required"),
+    # typos are named as written, with the nearest key and the section's keys
+    ("misspelt key in a section", mutate(r"physics_rate: 1000.0", "physics_rat: 1000.0"),
+     "sim.physics_rat", "did you mean 'sim.physics_rate'? Valid keys of section 'sim': "),
+    ("misspelt required key", mutate(r"turret_offset: 0.1641", "turet_offset: 0.1641"),
+     "ddrot.turet_offset", "did you mean 'ddrot.turret_offset'? Valid keys of section 'ddrot': "
+     "half_wheel_separation, turret_offset, wheel_radius"),
+    ("misspelt section", mutate(r"^    ddrot:", "    ddrott:"),
+     "ddrott.wheel_radius", "did you mean 'ddrot.wheel_radius'? Known sections: "),
 ]
 
 

@@ -34,6 +34,34 @@ def read_recording(path):
     return topics, meta
 
 
+#: the keys of one offered QoS profile, in rosbag2's order (rosbag2_storage,
+#: qos.cpp: convert<Rosbag2QoS>::encode, metadata version 9)
+ROSBAG2_QOS_KEYS = ["history", "depth", "reliability", "durability", "deadline", "lifespan",
+                    "liveliness", "liveliness_lease_duration", "avoid_ros_namespace_conventions"]
+
+
+def playback_durability(offered_qos_profiles: str) -> str:
+    """The durability `ros2 bag play` offers when it republishes a channel,
+    decided as rosbag2_storage's Rosbag2QoS::adapt_offer_to_recorded_offers
+    does: the recorded publishers' profile when all of them agree on the
+    policies that decide compatibility (reliability, durability, deadline,
+    liveliness and its lease), else rosbag2's default profile (volatile)."""
+    import yaml
+    profiles = yaml.safe_load(offered_qos_profiles) or []
+    same = ("reliability", "durability", "deadline", "liveliness", "liveliness_lease_duration")
+    if profiles and all(p[k] == profiles[0][k] for p in profiles for k in same):
+        return profiles[0]["durability"]
+    return "volatile"
+
+
+def channel_metadata(path):
+    """topic -> the channel's metadata of an MCAP file."""
+    from mcap.reader import make_reader
+    with open(path, "rb") as handle:
+        summary = make_reader(handle).get_summary()
+    return {c.topic: dict(c.metadata) for c in summary.channels.values()}
+
+
 def run(*argv, timeout=120):
     return subprocess.run(list(argv), capture_output=True, text=True, timeout=timeout)
 
@@ -74,6 +102,19 @@ def test_recording_holds_every_topic_and_the_plot_reads_it(ros, tmp_path):
     assert topics["/rec/joint_states"][-1].name[0] == "front_left_steer_joint"
     assert [m.name for m in meta] == ["holonomic_robot"]
     assert "xr4000" in meta[0].metadata["config"]
+    # every channel carries its publishers' QoS as rosbag2 writes it, and a
+    # replay re-latches the URDF (transient local) but not the odometry
+    import yaml
+    channels = channel_metadata(bag)
+    for topic, metadata in channels.items():
+        profiles = yaml.safe_load(metadata["offered_qos_profiles"])
+        assert profiles and all(list(p) == ROSBAG2_QOS_KEYS for p in profiles), (topic, metadata)
+        assert all(set(p["deadline"]) == {"sec", "nsec"} for p in profiles)
+    assert playback_durability(channels["/rec/robot_description"]["offered_qos_profiles"]) \
+        == "transient_local"
+    assert playback_durability(channels["/rec/odom"]["offered_qos_profiles"]) == "volatile"
+    assert yaml.safe_load(channels["/rec/odom"]["offered_qos_profiles"])[0]["reliability"] \
+        == "reliable"
 
     out = tmp_path / "plots"
     proc = run(sys.executable, "-c", "import sys; from holonomic_bringup.recording_plot "
@@ -188,7 +229,7 @@ def test_launch_file_mirrors_the_bringup_arguments():
     assert names == {"robot", "driver", "namespace", "params_file", "enable"}
     from holonomic_bringup.bringup import parse_args
     bringup = parse_args(["hamr", "--driver", "mock", "--namespace", "n",
-                          "--params-file", "f.yaml", "--enable"])
+                          "--params-file", str(ROOT / "config" / "hamr.yaml"), "--enable"])
     assert {"driver", "namespace", "params_file", "enable", "robot"} <= set(vars(bringup))
     try:
         import launch_ros  # noqa: F401  (only on a full ROS install)
@@ -199,6 +240,20 @@ def test_launch_file_mirrors_the_bringup_arguments():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert module.generate_launch_description().entities
+
+
+def test_launch_file_keeps_an_exported_discovery_range():
+    # The launch file needs `launch` (a full ROS install); its discovery rule
+    # is a plain function, run here alone.
+    path = ROOT / "src" / "holonomic_bringup" / "launch" / "bringup.launch.py"
+    text = path.read_text()
+    func = next(n for n in ast.parse(text).body
+                if isinstance(n, ast.FunctionDef) and n.name == "discovery_env")
+    scope: dict = {}
+    exec(ast.get_source_segment(text, func), scope)
+    assert scope["discovery_env"]({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}) == {}
+    assert scope["discovery_env"]({}) == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    assert "additional_env=discovery_env(os.environ)" in text
 
 
 def test_parameter_tables_in_the_readme_match_the_schema():

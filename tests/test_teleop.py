@@ -3,8 +3,6 @@ pseudo-terminal, publishing to this process and driving a simulated HAMR."""
 
 from __future__ import annotations
 
-import shutil
-import subprocess
 import time
 
 import numpy as np
@@ -50,6 +48,16 @@ def test_speed_keys_scale_and_stop_at_the_caps():
         s.key("q", 0.0)
     assert (s.speed, s.turn) == (2.0, 6.0)
     assert s.key("\x03", 0.0) == "quit" and s.twist(0.0) == (0, 0, 0)
+
+
+def test_shift_a_arms_and_d_disarms_and_both_stop_the_motion():
+    s = state()
+    s.key("I", 0.0)
+    assert s.key("A", 0.1) == "arm" and s.twist(0.1) == (0, 0, 0)
+    s.key("I", 0.2)
+    assert s.key("d", 0.3) == "disarm" and s.twist(0.3) == (0, 0, 0)
+    assert s.key("D", 0.4) == "disarm"
+    assert s.key("a", 0.5) is None      # lower-case a: no accidental arming
 
 
 @pytest.fixture
@@ -105,10 +113,42 @@ def test_stamped_mode_publishes_twiststamped_with_a_fresh_stamp(listen, ros):
         assert teleop.stop() == 0
 
 
-def test_teleop_without_a_terminal_says_so():
-    proc = subprocess.run([shutil.which("holonomic-teleop")], stdin=subprocess.DEVNULL,
-                          capture_output=True, text=True, timeout=30)
-    assert proc.returncode == 2 and "terminal" in proc.stderr
+def controller_state(probe) -> str | None:
+    """The motors' state the robot's diagnostics report, or None before any."""
+    diag = probe.diagnostics
+    if diag is None:
+        return None
+    return next((kv.value for s in diag.status for kv in s.values
+                 if kv.key == "controller_state"), None)
+
+
+def test_arm_keys_reach_the_robot_and_the_screen_says_who_listens(ros, tmp_path):
+    teleop = Teleop("--namespace", "tele4")
+    robot = None
+    probe = Probe(ros, "tele4")
+    try:
+        # no robot yet: said after the discovery grace period (3 s)
+        wait_until(lambda: (teleop.drain(), b"nothing subscribes to /tele4/cmd_vel"
+                            in teleop.output)[1], 20, "the no-subscriber warning")
+        assert b"A (Shift-a) : arm the motors" in teleop.output
+        robot = Bringup(["hamr", "--namespace", "tele4"], tmp_path / "bringup.log")
+        probe.wait_ready()
+        wait_until(lambda: (teleop.drain(), b"/tele4/cmd_vel: a robot listens"
+                            in teleop.output)[1], 20, "the robot to be seen")
+        wait_until(lambda: controller_state(probe) == "disarmed", 10, "disarmed diagnostics")
+        teleop.hold("i", 0.3)          # moving disarmed motors: the screen says why not
+        wait_until(lambda: (teleop.drain(), b"motors DISARMED: the robot will not move "
+                            b"(press A to arm)" in teleop.output)[1], 10, "the disarmed hint")
+        teleop.press("A")
+        wait_until(lambda: controller_state(probe) == "armed", 10, "the motors to arm")
+        teleop.press("d")
+        wait_until(lambda: controller_state(probe) == "disarmed", 10, "the motors to disarm")
+        wait_until(lambda: (teleop.drain(), b"disarm: " in teleop.output)[1], 5, "the answer")
+    finally:
+        assert teleop.stop() == 0
+        probe.close()
+        if robot is not None:
+            assert robot.stop() == 0, robot.log()
 
 
 def test_holding_the_strafe_key_moves_the_simulated_hamr_sideways(ros, tmp_path):

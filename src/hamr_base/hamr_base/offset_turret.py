@@ -1,6 +1,6 @@
 """Kinematics of the differential drive with an offset turret (DDROT, HAMR).
 
-Geometry (Costa & Yim, Fig. 5; frames per CONTRACT.md):
+Geometry (Costa & Yim, Fig. 5; frames and joints: docs/conventions.md):
 
 * a differential drive with wheel radius ``r`` and half wheel separation ``a``;
 * a turret -- ``base_link``, the payload platform -- whose vertical axis lies

@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from holonomic_core.command_line import ArgumentParser, ShowDefaults, number
+
 
 def _angles(text: str) -> list[float]:
     try:
@@ -46,8 +48,8 @@ def _param(text: str) -> tuple[str, object]:
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
-        prog="holonomic-analyze",
+    p = ArgumentParser(
+        prog="holonomic-analyze", formatter_class=ShowDefaults,
         description="Mobility ellipsoid, holonomicity (theoretical and measured) and caster "
                     "isotropy of a robot config.")
     p.add_argument("robot", help="a config name (hamr, xr4000, comr3) or a robot YAML")
@@ -56,7 +58,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("-p", "--param", action="append", type=_param, default=[],
                    metavar="NAME:=VALUE",
                    help="override a config parameter, e.g. -p ddrot.turret_offset:=0.2")
-    p.add_argument("--turret", type=float, metavar="PHI",
+    p.add_argument("--turret", type=number(), metavar="PHI",
                    help="DDROT: turret angle [rad] of the analysed configuration (default 0)")
     p.add_argument("--steer", type=_angles, metavar="PHI1,PHI2,...",
                    help="PCV: steering angles [rad], one per caster, the joints' convention "
@@ -78,17 +80,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--kinematic", action="store_true",
                    help="--measure in the kinematic limit: mock plant, joint speed limits "
                         "only (no twist or acceleration limits)")
-    p.add_argument("--distance", type=float, default=1.0, metavar="D_T",
-                   help="--measure: move distance [m] (default 1, the paper's)")
-    p.add_argument("--directions", type=int, default=8,
-                   help="--measure: directions, evenly spaced (default 8)")
+    p.add_argument("--distance", type=number(0.0, 100.0, strict_low=True, unit="m"), default=1.0,
+                   metavar="D_T", help="--measure: move distance [m] (1 m is the paper's)")
+    p.add_argument("--directions", type=number(2, 360, integer=True), default=8,
+                   help="--measure: directions, evenly spaced")
     p.add_argument("--heading-changes", type=_angles, default=[0.0], metavar="TH1,TH2,...",
-                   help="--measure: heading changes theta_T [rad] (default 0)")
+                   help="--measure: heading changes theta_T [rad]")
     args = p.parse_args(argv)
-    if not (math.isfinite(args.distance) and args.distance > 0):
-        p.error("--distance must be a positive number of metres")
-    if args.directions < 2:
-        p.error("--directions must be at least 2")
     if args.kinematic:
         args.driver = "mock"
     return args
@@ -106,7 +104,14 @@ def run(args: argparse.Namespace, out=None) -> dict:
     from holonomic_core.model import load_model
     from holonomic_analysis import holonomicity, isotropy, mobility
 
+    from holonomic_core.controller import load_config
     overrides = dict(args.param)
+    # The whole configuration, so that a misspelt -p or --sweep key is named
+    # (load_model alone reads only the geometry and would ignore it).
+    load_config(args.robot, overrides)
+    for text in args.sweep:
+        key, values = mobility.parse_sweep(text)
+        load_config(args.robot, {**overrides, key: float(values[0])})
     model = load_model(args.robot, overrides)
 
     def positions_of(m):
@@ -242,6 +247,9 @@ def main(argv: list[str] | None = None) -> int:
         run(args)
     except (ConfigError, ValueError, RuntimeError) as exc:
         print(f"holonomic-analyze: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:      # --plot DIR not writable
+        print(f"holonomic-analyze: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
         return 2
     return 0
 

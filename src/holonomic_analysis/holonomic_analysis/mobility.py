@@ -21,7 +21,7 @@ The paper reads both through *projections* ("shadows": the twists reachable
 when the third component is free) and *intersections* (the third component
 held at 0, e.g. ``wz = 0``: translation at constant heading).
 
-Theoretical holonomicity (CONTRACT.md): ``H_hat`` = slowest / fastest
+Theoretical holonomicity (docs/conventions.md): ``H_hat`` = slowest / fastest
 translation speed at constant heading over all directions, within the joint
 speed limits -- the radii of the ``wz = 0`` intersection of P. The paper's
 eq. 3 uses the min/max radius of the ME; we use P, because the joint speed

@@ -123,16 +123,22 @@ def sweep_plot(rows: list[dict], key: str, title: str, path: Path) -> Path:
 
 def isotropy_trajectory_plot(times, index, segments, title: str, path: Path) -> Path:
     """Isotropy index along a scripted trajectory, with the segment names."""
-    fig, ax = plt.subplots(figsize=(10, 4))
+    fig, ax = plt.subplots(figsize=(10, 4.4))
     ax.plot(times, index)
-    for start, name in segments:
+    # Segment n is numbered above the plot at its start (names under the
+    # axes): text inside the axes would cross the curve.
+    for n, (start, _) in enumerate(segments, 1):
         ax.axvline(start, color="0.7", linewidth=0.6)
-        ax.text(start + 0.05, 0.02, name, rotation=90, fontsize=7, va="bottom")
-    ax.set_ylim(0.0, 1.02)
+        ax.annotate(str(n), (start, 1.0), xycoords=("data", "axes fraction"),
+                    xytext=(3, 2), textcoords="offset points", fontsize=8, color="tab:blue")
+    ax.set_ylim(0.0, 1.05)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("isotropy index (best L)")
-    ax.set_title(title)
-    fig.tight_layout()
+    ax.set_title(title, pad=14)
+    fig.text(0.5, 0.01, "segment starts: " + "   ".join(
+        f"{n} {name}" for n, (_, name) in enumerate(segments, 1)),
+        ha="center", va="bottom", fontsize=8)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -151,7 +157,8 @@ def measured_plot(measurement, title: str, path: Path) -> Path:
                       f"H = {measurement.h_of(theta):.2f}")
     ax.set_title(f"{title}\ntime [s] to move d_T = {measurement.distance:g} m, by direction",
                  fontsize=9)
-    ax.legend(fontsize=8, loc="lower left", bbox_to_anchor=(-0.1, -0.15))
+    # below the polar axes, clear of the angle labels
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -29,6 +29,7 @@ from geometry_msgs.msg import TransformStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry as OdometryMsg
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -187,6 +188,10 @@ class BaseControllerNode(Node):
             flat = read_params_file(path)
         else:
             path, flat = "<parameters>", {}
+            if not overrides:
+                raise ConfigError("robot_config", "", "a config name (hamr, xr4000, comr3) or a "
+                                  "YAML path: --ros-args -p robot_config:=hamr, or the whole "
+                                  "configuration through --ros-args --params-file FILE")
         flat.update(overrides)
         return config_from_flat(flat, str(path))
 
@@ -251,9 +256,15 @@ class BaseControllerNode(Node):
         self._accept((twist.linear.x, twist.linear.y, twist.angular.z), received)
 
     def _accept(self, twist, received) -> None:
+        ignored = self.controller.counters["commands_while_disarmed"]
         error = self.controller.set_command(twist, received)
         if error:
             self.get_logger().warn(error, throttle_duration_sec=1.0)
+        elif self.controller.counters["commands_while_disarmed"] != ignored:
+            self.get_logger().warn(
+                f"cmd_vel received while the motors are {self.controller.state.value.upper()}: "
+                "the base does not move (arm with `holonomic-ctl enable` or the ~/enable service)",
+                throttle_duration_sec=5.0)
 
     def _wait(self, future):
         try:
@@ -376,14 +387,25 @@ class BaseControllerNode(Node):
             self._status(f"{NODE_NAME}: control loop", loop_level,
                          f"{loop['rate_hz']:.1f} Hz, p99 period {loop['period_p99_ms']:.2f} ms",
                          {k: f"{v:.3f}" if isinstance(v, float) else str(v) for k, v in loop.items()}),
-            self._status(f"{NODE_NAME}: command", DiagnosticStatus.OK,
-                         "stale: stopping" if c.stale else "tracking", cmd_values),
+            self._command_status(cmd_values),
             self._status(f"{NODE_NAME}: odometry", DiagnosticStatus.OK,
                          f"{odo.estimator}, {odo.distance:.2f} m", odo_values),
         ]
         for status in statuses:
             status.hardware_id = robot
         self.diag_pub.publish(DiagnosticArray(header=Header(stamp=now), status=statuses))
+
+    def _command_status(self, values) -> DiagnosticStatus:
+        c = self.controller
+        values["commands_while_disarmed"] = str(c.counters["commands_while_disarmed"])
+        # WARN while commands arrive that the disarmed motors cannot follow
+        # (within the last 2 diagnostics periods)
+        if c.commanded_while_disarmed(2.0):
+            return self._status(f"{NODE_NAME}: command", DiagnosticStatus.WARN,
+                                f"commands received while {c.state.value}: not moving "
+                                "(holonomic-ctl enable)", values)
+        return self._status(f"{NODE_NAME}: command", DiagnosticStatus.OK,
+                            "stale: stopping" if c.stale else "tracking", values)
 
     def _unit_names(self):
         kin = self.config.model.kinematics
@@ -433,7 +455,11 @@ def main(argv: list[str] | None = None, record: str | None = None) -> int:
     argv = sys.argv if argv is None else argv
     # Our own signal handling: rclpy's would shut the context down before we
     # have stopped the motors.
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except rclpy_implementation.RCLError as exc:   # malformed --ros-args or params file
+        print(f"{NODE_NAME}: invalid ROS arguments: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
     if STOP.is_set():
         rclpy.try_shutdown()
         return 0

@@ -14,13 +14,15 @@ import os
 import sys
 
 from holonomic_bringup.process_guard import install_signal_handlers
+from holonomic_bringup.ros_names import namespace
+from holonomic_core.command_line import ArgumentParser, ShowDefaults
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     from holonomic_core.driver import DRIVER_REGISTRY
 
-    parser = argparse.ArgumentParser(
-        prog="holonomic-bringup",
+    parser = ArgumentParser(
+        prog="holonomic-bringup", formatter_class=ShowDefaults,
         description="Start the base controller, its driver (simulator or motor drives) "
                     "and its topics for one robot. Motors start disarmed unless --enable.")
     parser.add_argument("robot", help="a config name from config/ (hamr, xr4000, comr3) "
@@ -33,8 +35,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "simulator's joints (check a robot's CAN YAML before the hardware)")
     parser.add_argument("--gui", action="store_true",
                         help="show the pybullet GUI (sim and --sim-drives only)")
-    parser.add_argument("--namespace", default="", help="ROS namespace of the robot's "
-                                                        "node and topics")
+    parser.add_argument("--namespace", type=namespace, default="",
+                        help="ROS namespace of the robot's node, topics and frames")
     parser.add_argument("--params-file", action="append", default=[], metavar="FILE",
                         help="extra ROS 2 params file(s) overriding the robot config")
     parser.add_argument("--enable", action="store_true",
@@ -47,7 +49,46 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="record cmd_vel, odom, /tf, joint_states, ground_truth/odom, "
                              "diagnostics and robot_description to an MCAP file "
                              "(Foxglove, ros2 bag, holonomic-plot)")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    check_args(parser, args)
+    return args
+
+
+def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """What argparse cannot check alone; exits 2 with one line (parser.error)."""
+    from holonomic_core.model import read_params_file
+    from holonomic_core.schema import ConfigError
+    from pathlib import Path
+
+    import yaml
+    for item in args.param:
+        name, _, value = item.partition(":=")
+        if ":=" not in item or not name:
+            parser.error(f"-p expects NAME:=VALUE (e.g. -p cmd_timeout:=1.0), got {item!r}")
+        try:    # rcl reads the value as YAML; a malformed one would stop rclpy.init
+            yaml.safe_load(value)
+        except yaml.YAMLError:
+            parser.error(f"-p {name}: the value {value!r} is not valid YAML "
+                         "(a number, true/false, a string or a [list])")
+    for path in args.params_file:
+        if not Path(path).is_file():
+            parser.error(f"--params-file: no such file: {path}")
+        try:
+            read_params_file(Path(path))
+        except ConfigError as exc:
+            parser.error(f"--params-file {path}: expected {exc.allowed}")
+    if args.record:
+        if not args.record.endswith(".mcap"):
+            parser.error(f"--record wants a FILE.mcap, got {args.record!r}")
+        folder = Path(args.record).absolute().parent
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            parser.error(f"--record: cannot create the folder {str(folder)!r}: {exc.strerror}")
+        if not os.access(folder, os.W_OK):
+            parser.error(f"--record: the folder {str(folder)!r} is not writable")
+    if args.gui and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        parser.error("--gui needs a display (DISPLAY is not set); run headless without --gui")
 
 
 def ros_arguments(args: argparse.Namespace) -> list[str]:
@@ -56,7 +97,7 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
 
     ros = ["--ros-args", "-p", f"robot_config:={resolve_config(args.robot)}"]
     if args.namespace:
-        ns = args.namespace if args.namespace.startswith("/") else "/" + args.namespace
+        ns = args.namespace     # absolute, checked by ros_names.namespace
         ros += ["-r", f"__ns:={ns}"]
         # every frame of the robot under its namespace too (a -p frame_prefix
         # given below wins: later overrides replace earlier ones)
@@ -72,8 +113,6 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
     for path in args.params_file:
         ros += ["--params-file", path]
     for item in args.param:
-        if ":=" not in item:
-            raise SystemExit(f"holonomic-bringup: -p expects NAME:=VALUE, got {item!r}")
         ros += ["-p", item]
     return ros
 
@@ -95,10 +134,6 @@ def main(argv: list[str] | None = None) -> int:
     if args.sim_drives and args.driver not in ("odrive_can", "cia402"):
         print("holonomic-bringup: --sim-drives needs --driver odrive_can or --driver cia402 "
               f"(got {args.driver or 'the config default'})", file=sys.stderr)
-        return 2
-    if args.record and not args.record.endswith(".mcap"):
-        print(f"holonomic-bringup: --record wants a FILE.mcap, got {args.record!r}",
-              file=sys.stderr)
         return 2
     if args.fleet is not None:
         problem = ("N must be between 1 and 100" if not 1 <= args.fleet <= 100 else

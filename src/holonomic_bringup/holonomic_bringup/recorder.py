@@ -2,8 +2,10 @@
 
 A node in the bringup's process subscribes to the robot's topics with raw
 (serialized CDR) subscriptions and writes every message unchanged, with the
-ROS 2 message definitions as ``ros2msg`` schemas -- the layout rosbag2's MCAP
-storage uses, so Foxglove, ``ros2 bag`` and the ``mcap`` tools open the file.
+ROS 2 message definitions as ``ros2msg`` schemas and each channel's
+publishers' QoS as ``offered_qos_profiles`` metadata -- the layout rosbag2's
+MCAP storage uses, so Foxglove, ``ros2 bag`` (which re-latches
+``robot_description`` from that metadata) and the ``mcap`` tools open the file.
 Each robot's validated configuration is stored as MCAP metadata
 (``holonomic_robot``), so ``holonomic-plot`` can recompute per-wheel slip
 residuals from the recorded joint states with the very same model.
@@ -87,6 +89,32 @@ def message_definition(type_name: str) -> str:
     return "\n".join(parts) + "\n"
 
 
+def _duration(nanoseconds: int) -> dict:
+    """An rmw_time_t as rosbag2 writes it (``{sec, nsec}``); rclpy reports an
+    unset (infinite) duration as 2**63 - 1 ns = RMW_DURATION_INFINITE."""
+    return {"sec": nanoseconds // 1_000_000_000, "nsec": nanoseconds % 1_000_000_000}
+
+
+def offered_qos_yaml(profiles) -> str:
+    """rosbag2's ``offered_qos_profiles`` text (rosbag2_storage's qos.cpp,
+    metadata version 9): a YAML list with one mapping per publisher -- history,
+    depth, reliability, durability, deadline, lifespan, liveliness,
+    liveliness_lease_duration, avoid_ros_namespace_conventions -- policies as
+    rmw's lower-case names (``keep_last``, ``transient_local``...).
+    ``profiles``: rclpy QoSProfiles (e.g. ``TopicEndpointInfo.qos_profile``)."""
+    return yaml.safe_dump([{
+        "history": p.history.name.lower(),
+        "depth": int(p.depth),
+        "reliability": p.reliability.name.lower(),
+        "durability": p.durability.name.lower(),
+        "deadline": _duration(p.deadline.nanoseconds),
+        "lifespan": _duration(p.lifespan.nanoseconds),
+        "liveliness": p.liveliness.name.lower(),
+        "liveliness_lease_duration": _duration(p.liveliness_lease_duration.nanoseconds),
+        "avoid_ros_namespace_conventions": bool(p.avoid_ros_namespace_conventions),
+    } for p in profiles], sort_keys=False, default_flow_style=False)
+
+
 def _message_class(type_name: str):
     import importlib
     package, _, name = type_name.split("/")
@@ -132,16 +160,26 @@ class McapRecorder:
         if type_name not in self._schemas:
             self._schemas[type_name] = self._writer.register_schema(
                 type_name, "ros2msg", message_definition(type_name).encode())
-        channel = self._writer.register_channel(topic, "cdr", self._schemas[type_name])
         # robot_description is latched (transient local); the rest as published
         durable = topic.endswith("robot_description")
         qos = QoSProfile(depth=1 if durable else 100, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL if durable
                          else DurabilityPolicy.VOLATILE)
+        channel: list[int] = []
 
-        def write(data: bytes, channel=channel) -> None:
+        def write(data: bytes) -> None:
+            if not channel:
+                # Registered at the first message, like rosbag2 registers a
+                # topic once it has discovered its publishers: their offered
+                # QoS goes into the channel's metadata, from which `ros2 bag
+                # play` chooses its own (and re-latches robot_description).
+                profiles = [info.qos_profile for info in
+                            self.node.get_publishers_info_by_topic(topic)]
+                channel.append(self._writer.register_channel(
+                    topic, "cdr", self._schemas[type_name],
+                    metadata={"offered_qos_profiles": offered_qos_yaml(profiles)}))
             now = time.time_ns()
-            self._writer.add_message(channel, log_time=now, data=data, publish_time=now)
+            self._writer.add_message(channel[0], log_time=now, data=data, publish_time=now)
             self.count += 1
 
         self._subs.append(self.node.create_subscription(

@@ -11,14 +11,16 @@ messages per topic, final odometry error against ground truth.
 
 from __future__ import annotations
 
-import argparse
 import math
+import os
 import sys
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 import yaml
+
+from holonomic_core.command_line import ArgumentParser, ShowDefaults
 
 
 def _yaw(q) -> float:
@@ -96,7 +98,7 @@ def plot_robot(ns: str, flat: dict, series: dict, out: Path, stem: str) -> tuple
 
     prefix = "" if ns == "/" else ns
     name = flat.get("robot.name", "robot")
-    label = f"{name} ({ns})"
+    label = name if ns == "/" else f"{name} in {ns}"
     tag = stem + ("" if ns == "/" else "_" + ns.strip("/").replace("/", "_"))
     figures, summary = [], {}
     odom = series.get(f"{prefix}/odom", [])
@@ -116,19 +118,30 @@ def plot_robot(ns: str, flat: dict, series: dict, out: Path, stem: str) -> tuple
         ax.set_xlabel("x [m] (odom)")
         ax.set_ylabel("y [m] (odom)")
         ax.set_title(f"{label}: path")
-        ax.legend()
+        ax.legend(fontsize=8)
         colors = ("tab:red", "tab:green", "tab:blue")
         for i, comp in enumerate(("vx [m/s]", "vy [m/s]", "wz [rad/s]")):
-            axv.plot(t_o, tw_o[:, i], color=colors[i], label=f"odom {comp}")
+            axv.plot(t_o, tw_o[:, i], color=colors[i])
             if truth:
                 axv.plot(t_g, tw_g[:, i], color=colors[i], alpha=0.35, lw=3)
             if cmd:
                 t_c, c = _cmd_arrays(cmd)
                 axv.step(t_c, c[:, i], where="post", color=colors[i], linestyle=":")
         axv.set_xlabel("time [s]")
-        axv.set_title("body velocity: odometry (line), ground truth (thick), cmd_vel (dotted)",
-                      fontsize=9)
-        axv.legend(fontsize=8)
+        axv.set_ylabel("body twist in base_link")
+        axv.set_title(f"{label}: body velocity")
+        # One legend for every line: the colour says the component, the
+        # style the source.
+        from matplotlib.lines import Line2D
+        handles = [Line2D([], [], color=c, label=comp) for c, comp in
+                   zip(colors, ("vx [m/s]", "vy [m/s]", "wz [rad/s]"))]
+        handles.append(Line2D([], [], color="0.3", label="odometry"))
+        if truth:
+            handles.append(Line2D([], [], color="0.3", alpha=0.35, lw=3, label="ground truth"))
+        if cmd:
+            handles.append(Line2D([], [], color="0.3", ls=":", label="cmd_vel"))
+        axv.legend(handles=handles, fontsize=8, ncol=2)
+        axv.grid(True, alpha=0.3)
         fig.tight_layout()
         path = out / f"{tag}_motion.png"
         fig.savefig(path, dpi=110)
@@ -153,25 +166,27 @@ def plot_robot(ns: str, flat: dict, series: dict, out: Path, stem: str) -> tuple
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="holonomic-plot", description=__doc__.split("\n")[0])
+    parser = ArgumentParser(prog="holonomic-plot", description=__doc__.split("\n\n")[0],
+                            formatter_class=ShowDefaults)
     parser.add_argument("recording", type=Path, help="an MCAP file from holonomic-bringup --record")
     parser.add_argument("--out", type=Path, help="folder of the PNGs (default: beside the file)")
     args = parser.parse_args(argv)
     if not args.recording.is_file():
-        print(f"holonomic-plot: no such file: {args.recording}", file=sys.stderr)
-        return 2
+        parser.error(f"no such file: {args.recording}")
     try:
         robots, series, types = load(args.recording)
     except Exception as exc:  # a truncated or foreign file: say so, no traceback
-        print(f"holonomic-plot: cannot read {args.recording} as an MCAP recording: {exc}",
-              file=sys.stderr)
-        return 2
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        parser.error(f"cannot read {args.recording} as an MCAP recording: {first}")
     if not robots:
-        print(f"holonomic-plot: {args.recording} has no robot (not made by "
-              "holonomic-bringup --record)", file=sys.stderr)
-        return 2
+        parser.error(f"{args.recording} has no robot (not made by holonomic-bringup --record)")
     out = args.out or args.recording.parent
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        if not os.access(out, os.W_OK):
+            raise PermissionError(13, "not writable")
+    except OSError as exc:
+        parser.error(f"--out: cannot write into {str(out)!r}: {exc.strerror}")
     duration = max((s[-1][0] for s in series.values() if s), default=0.0)
     print(f"{args.recording}: {duration:.1f} s, {len(robots)} robot(s)")
     for topic in sorted(series):

@@ -5,8 +5,11 @@ The full-ROS equivalent of ``holonomic-bringup ROBOT``: the base controller
 node (which owns the driver, so with driver:=sim the simulator runs inside
 it), with the same arguments and the same namespace and frame-prefix rules.
 Recording: ``ros2 bag record -s mcap ...`` on a full install, or
-``holonomic-bringup --record``.
+``holonomic-bringup --record``. DDS discovery stays on this machine
+(ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) unless a range is exported.
 """
+
+import os
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
@@ -35,8 +38,16 @@ def _node(context):
     parameters = [params] + ([arg["params_file"]] if arg["params_file"] else [])
     return [Node(package="holonomic_bringup", executable="base_controller",
                  name="base_controller", namespace=ns, parameters=parameters,
-                 output="screen", emulate_tty=True,
-                 additional_env={"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})]
+                 output="screen", emulate_tty=True, additional_env=discovery_env(os.environ))]
+
+
+def discovery_env(environ) -> dict:
+    """DDS stays on this machine unless the user exported a discovery range
+    (e.g. SUBNET for a robot driven from another machine): the same default
+    the holonomic-* programs apply."""
+    if environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        return {}
+    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 
 
 def generate_launch_description():

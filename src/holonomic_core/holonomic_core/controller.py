@@ -295,7 +295,10 @@ class BaseController:
         self.stale = True
         self.fault: str | None = None
         self.counters = {"rejected_commands": 0, "timeouts": 0, "driver_errors": 0,
-                         "implausible_readings": 0, "cycles": 0}
+                         "implausible_readings": 0, "cycles": 0, "commands_while_disarmed": 0}
+        #: clock time [s] of the last non-zero command received while the
+        #: motors were not armed (-inf: none): the base cannot follow it
+        self.last_command_while_disarmed = -math.inf
 
     # -- inputs (any thread) -------------------------------------------------------
     def set_command(self, twist, received: float | None = None) -> str | None:
@@ -323,7 +326,15 @@ class BaseController:
             what = "non-finite" if values is not None else "malformed"
             return f"{what} command {repr(twist)[:80]} rejected; stopping the base"
         self._command = (values, now)
+        if values.any() and self.state is not ControllerState.ARMED:
+            self.counters["commands_while_disarmed"] += 1
+            self.last_command_while_disarmed = now
         return None
+
+    def commanded_while_disarmed(self, within: float) -> bool:
+        """True when a non-zero command arrived in the last ``within`` seconds
+        while the motors were disarmed or faulted (it moves nothing)."""
+        return self._clock() - self.last_command_while_disarmed <= within
 
     def request_enable(self, enable: bool) -> concurrent.futures.Future:
         """Ask the loop to arm (True) or disarm (False) the motors.

@@ -1,7 +1,7 @@
 """The kinematics protocol every base family implements, and their registry.
 
 A base's kinematics map joint rates to the planar body twist of ``base_link``
-and back. Conventions (REP 103, ``shared/CONTRACT.md``):
+and back. Conventions (REP 103, docs/conventions.md):
 
 * twist: ``(vx, vy, wz)`` in ``base_link`` -- m/s, m/s, rad/s;
 * joint positions / rates: arrays in :attr:`BaseKinematics.joint_names` order,
@@ -21,7 +21,7 @@ import numpy as np
 
 from holonomic_core.schema import ConfigError, ParamSpec
 
-#: The estimators ``forward`` understands (see CONTRACT.md, Python API).
+#: The estimators ``forward`` understands (docs/conventions.md, Python API).
 ESTIMATORS = ("slip_min", "pinv", "robust")
 
 

@@ -18,6 +18,7 @@ ROS 2 does, and every key is validated against the schema of
 
 from __future__ import annotations
 
+import difflib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +29,8 @@ import numpy as np
 import yaml
 
 from holonomic_core.kinematics import BaseKinematics, kinematics_class
-from holonomic_core.schema import ConfigError, ParamSpec, flatten, unknown_keys, validate
+from holonomic_core.schema import (ConfigError, ParamSpec, flatten, unknown_key_error,
+                                   unknown_keys, validate)
 
 #: the node name under which config files hold their parameters
 NODE_NAME = "base_controller"
@@ -86,17 +88,45 @@ class RobotModel:
         return np.array([j.max_velocity for j in self.joint_limits])
 
     def inverse(self, positions, twist) -> np.ndarray:
-        """Joint rates [rad/s] for base_link ``twist`` = (vx, vy, wz) at ``positions``."""
-        return self.kinematics.inverse(np.asarray(positions, float), np.asarray(twist, float))
+        """Joint rates [rad/s], ``joint_names`` order, for the base_link ``twist``
+        (vx, vy, wz) [m/s, m/s, rad/s] at joint ``positions`` [rad].
+
+        Raises ValueError naming the expected length for a wrong-length or
+        non-finite input."""
+        return self.kinematics.inverse(self._joint_vector("positions", positions),
+                                       _vector("twist", twist, 3, "vx, vy, wz in base_link"))
 
     def forward(self, positions, velocities, estimator: str = "slip_min") -> np.ndarray:
-        """Body twist (vx, vy, wz) in base_link from joint rates [rad/s]."""
-        return self.kinematics.forward(np.asarray(positions, float),
-                                       np.asarray(velocities, float), estimator)
+        """Body twist (vx, vy, wz) [m/s, m/s, rad/s] in base_link from joint
+        ``positions`` [rad] and ``velocities`` [rad/s] (``joint_names`` order).
+
+        ``estimator``: "slip_min" (C# = Cp+ Cq^-1), "pinv" or "robust". Raises
+        ValueError for a wrong-length or non-finite input or an unknown estimator."""
+        return self.kinematics.forward(self._joint_vector("positions", positions),
+                                       self._joint_vector("velocities", velocities), estimator)
 
     def jacobian(self, positions) -> np.ndarray:
-        """``J_joint_to_base`` (3 x n) at ``positions``."""
-        return self.kinematics.jacobian(np.asarray(positions, float))
+        """``J_joint_to_base`` (3 x n) at joint ``positions`` [rad]."""
+        return self.kinematics.jacobian(self._joint_vector("positions", positions))
+
+    def _joint_vector(self, what: str, value) -> np.ndarray:
+        return _vector(what, value, len(self.joint_names),
+                       f"one per joint of {self.name}: {', '.join(self.joint_names)}")
+
+
+def _vector(what: str, value, length: int, meaning: str) -> np.ndarray:
+    """``value`` as a finite float vector of ``length``, or ValueError saying
+    what was expected."""
+    try:
+        out = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}: expected {length} numbers ({meaning}), got {value!r}") from None
+    if out.shape != (length,):
+        raise ValueError(f"{what}: expected {length} numbers ({meaning}), "
+                         f"got shape {out.shape}: {value!r}")
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f"{what}: expected finite numbers ({meaning}), got {value!r}")
+    return out
 
 
 def config_search_path() -> list[Path]:
@@ -130,7 +160,9 @@ def resolve_config(source: str | os.PathLike) -> Path:
         if candidate.is_file():
             return candidate
     names = sorted({p.stem for d in config_search_path() if d.is_dir() for p in d.glob("*.yaml")})
-    raise ConfigError("robot", text, f"a config name {names} or a path to a YAML file")
+    nearest = difflib.get_close_matches(text, names, n=1)
+    raise ConfigError("robot", text, f"a config name {names} or a path to a YAML file"
+                      + (f"; did you mean '{nearest[0]}'?" if nearest else ""))
 
 
 def read_params_file(path: Path, node_name: str = NODE_NAME) -> dict[str, Any]:
@@ -138,7 +170,11 @@ def read_params_file(path: Path, node_name: str = NODE_NAME) -> dict[str, Any]:
     try:
         doc = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
-        raise ConfigError("robot", str(path), f"valid YAML ({exc})") from exc
+        # pyyaml's message spans several lines (it quotes the text): one line here
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        what = getattr(exc, "problem", None) or " ".join(str(exc).split())
+        raise ConfigError("robot", str(path), f"valid YAML ({what}{where})") from exc
     if not isinstance(doc, Mapping):
         raise ConfigError("robot", str(path), "a ROS 2 params file (a mapping at top level)")
     flat: dict[str, Any] = {}
@@ -203,6 +239,4 @@ def check_no_unknown(specs: list[ParamSpec], flat: Mapping[str, Any],
     """Reject keys no schema declares, so that a typo is not silently ignored."""
     extra = [k for k in unknown_keys(specs, flat) if not k.startswith(ignore_prefixes)]
     if extra:
-        known = sorted({s.name.split(".")[0] for s in specs})
-        raise ConfigError(extra[0], flat[extra[0]],
-                          f"no such parameter (known sections: {known})")
+        raise unknown_key_error(extra[0], flat[extra[0]], (s.name for s in specs))

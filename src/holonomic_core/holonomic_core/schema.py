@@ -9,6 +9,7 @@ which is how ROS 2 params files name nested parameters.
 
 from __future__ import annotations
 
+import difflib
 import math
 from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Sequence
@@ -19,11 +20,11 @@ _TYPES = ("double", "int", "bool", "string", "double_array", "string_array")
 class ConfigError(ValueError):
     """An invalid configuration value, naming the key and what is allowed."""
 
-    def __init__(self, key: str, value: Any, allowed: str):
+    def __init__(self, key: str, value: Any, allowed: str, message: str | None = None):
         self.key = key
         self.value = value
         self.allowed = allowed
-        super().__init__(f"invalid parameter '{key}' = {value!r}: expected {allowed}")
+        super().__init__(message or f"invalid parameter '{key}' = {value!r}: expected {allowed}")
 
 
 @dataclass(frozen=True)
@@ -135,15 +136,55 @@ def validate(specs: Iterable[ParamSpec], flat: Mapping[str, Any]) -> dict[str, A
     Raises :class:`ConfigError` for the first missing or invalid key. Keys in
     ``flat`` that no spec names are left to :func:`unknown_keys`.
     """
+    specs = list(specs)
+    names = [s.name for s in specs]
     out: dict[str, Any] = {}
     for spec in specs:
         if spec.name in flat:
             out[spec.name] = spec.coerce(flat[spec.name])
         elif spec.required:
+            # A required key that is missing is usually a misspelt one: name
+            # the misspelling as written (``ddrot.turet_offset``), not only
+            # the key it should have been.
+            typo = [k for k in flat if k not in names and _misspelt(k, spec.name)]
+            if typo:
+                raise unknown_key_error(typo[0], flat[typo[0]], names)
             raise ConfigError(spec.name, "<missing>", spec.allowed() + " (required)")
         else:
             out[spec.name] = spec.default
     return out
+
+
+def _misspelt(written: str, meant: str) -> bool:
+    """``written`` is ``meant`` with one dotted component misspelt
+    (``ddrot.turet_offset``, ``ddrott.wheel_radius``) -- not another
+    section's key of the same name (``cia402.joints.J.node_id`` is no typo of
+    ``odrive_can.joints.J.node_id``)."""
+    a, b = written.split("."), meant.split(".")
+    differ = [(x, y) for x, y in zip(a, b) if x != y]
+    return len(a) == len(b) and len(differ) == 1 and \
+        difflib.SequenceMatcher(None, *differ[0]).ratio() >= 0.75
+
+
+def unknown_key_error(key: str, value: Any, names: Iterable[str]) -> ConfigError:
+    """The error for a key no spec declares: the key as written, the nearest
+    declared key (difflib) and the valid keys of its section (or the sections,
+    when the section itself is unknown)."""
+    names = sorted(set(names))
+    section = key.rsplit(".", 1)[0] + "." if "." in key else ""
+    siblings = [n for n in names if n.startswith(section) and "." not in n[len(section):]] \
+        if section else [n for n in names if "." not in n]
+    nearest = difflib.get_close_matches(key, names, n=1, cutoff=0.6)
+    text = "no such parameter"
+    if nearest:
+        text += f"; did you mean '{nearest[0]}'?"
+    if siblings:
+        where = f"section '{section[:-1]}'" if section else "the top level"
+        text += f" Valid keys of {where}: {', '.join(n[len(section):] for n in siblings)}"
+    else:
+        sections = sorted({n.split(".")[0] for n in names if "." in n})
+        text += f" Known sections: {', '.join(sections)}"
+    return ConfigError(key, value, text, f"unknown parameter '{key}' (= {value!r}): {text}")
 
 
 def unknown_keys(specs: Iterable[ParamSpec], flat: Mapping[str, Any]) -> list[str]:

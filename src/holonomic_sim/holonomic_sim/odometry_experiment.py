@@ -34,6 +34,8 @@ from holonomic_core.controller import BaseController, load_config
 from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.loop import ManualClock
 from holonomic_core.odometry import Odometry, wrap_angle
+from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
+                                         robot_config)
 from holonomic_core.schema import ConfigError
 
 #: slip conditions: name -> simulator overrides (per-wheel friction spread is
@@ -45,6 +47,18 @@ CONDITIONS = {
     "worn tyres (r +-2 %)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0,
                              "sim.wheel_radius_spread": 0.02},
 }
+#: short name on the command line (its first word) -> the condition's full name
+CONDITION_KEYS = {name.split()[0]: name for name in CONDITIONS}
+
+
+def condition_name(text: str) -> str:
+    """An argparse type: a condition's short name (``worn``) or full name."""
+    if text in CONDITIONS:
+        return text
+    if text in CONDITION_KEYS:
+        return CONDITION_KEYS[text]
+    raise argparse.ArgumentTypeError(
+        f"expected one of {', '.join(CONDITION_KEYS)}, got {text!r}")
 
 
 @dataclass
@@ -157,16 +171,25 @@ def summarize(trials: list[Trial]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="holonomic-odometry-experiment",
-                                     description=__doc__.split("\n")[0])
-    parser.add_argument("--robot", default="xr4000", help="config name or YAML (default xr4000)")
-    parser.add_argument("--seeds", type=int, default=20, help="random runs per condition")
-    parser.add_argument("--duration", type=float, default=60.0, help="random motion [s]")
-    parser.add_argument("--speed", type=float, default=1.25, help="top speed [m/s]")
-    parser.add_argument("--acceleration", type=float, default=2.0, help="[m/s^2]")
-    parser.add_argument("--condition", action="append", choices=list(CONDITIONS),
-                        help="slip condition(s) (default: all)")
-    parser.add_argument("--json", metavar="FILE", help="write every trial to FILE")
+    parser = ArgumentParser(prog="holonomic-odometry-experiment", formatter_class=ShowDefaults,
+                            description=__doc__.split("\n\n")[0])
+    parser.add_argument("--robot", type=robot_config, default="xr4000",
+                        help="config name or YAML")
+    parser.add_argument("--seeds", type=number(1, 10000, integer=True), default=20,
+                        help="random runs per condition")
+    parser.add_argument("--duration", type=number(0.0, 3600.0, strict_low=True, unit="s"),
+                        default=60.0, help="random motion [s]")
+    parser.add_argument("--speed", type=number(0.0, 10.0, strict_low=True, unit="m/s"),
+                        default=1.25, help="top speed [m/s]")
+    parser.add_argument("--acceleration", type=number(0.0, 100.0, strict_low=True,
+                                                      unit="m/s^2"),
+                        default=2.0, help="[m/s^2]")
+    parser.add_argument("--condition", action="append", type=condition_name,
+                        metavar="|".join(CONDITION_KEYS),
+                        help="slip condition(s), repeatable (default: all): "
+                             + "; ".join(f"{k} = {v}" for k, v in CONDITION_KEYS.items()))
+    parser.add_argument("--json", type=output_file, metavar="FILE",
+                        help="write every trial to FILE")
     args = parser.parse_args(argv)
     trials = []
     for condition in args.condition or list(CONDITIONS):

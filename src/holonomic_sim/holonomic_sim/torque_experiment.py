@@ -18,13 +18,14 @@ Prints a table (and writes it with ``--markdown FILE``).
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 
 import numpy as np
 import pybullet as pb
 
+from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
+                                         robot_config)
 from holonomic_core.controller import BaseController, load_config
 from holonomic_core.loop import ManualClock
 from holonomic_core.odometry import wrap_angle
@@ -185,12 +186,19 @@ def table(rows) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="holonomic-torque-experiment",
-                                     description=__doc__.split("\n")[0])
-    parser.add_argument("--robot", default="xr4000", help="a PCV config (default xr4000)")
-    parser.add_argument("--friction", type=float, default=1.0, help="wheel friction")
-    parser.add_argument("--markdown", metavar="FILE", help="also write the table to FILE")
+    parser = ArgumentParser(prog="holonomic-torque-experiment", formatter_class=ShowDefaults,
+                            description=__doc__.split("\n\n")[0])
+    parser.add_argument("--robot", type=robot_config, default="xr4000",
+                        help="a PCV config name or YAML")
+    parser.add_argument("--friction", type=number(0.0, 10.0, strict_low=True), default=1.0,
+                        help="wheel friction coefficient")
+    parser.add_argument("--markdown", type=output_file, metavar="FILE",
+                        help="also write the table to FILE")
     args = parser.parse_args(argv)
+    kind = load_config(args.robot).model.kind
+    if kind != "pcv":
+        parser.error(f"--robot: {args.robot} is a {kind}; the experiment needs a "
+                     "powered-caster vehicle (pcv), e.g. xr4000 or comr3")
     rows = []
     for trajectory in TRAJECTORIES:
         for mode in MODES:

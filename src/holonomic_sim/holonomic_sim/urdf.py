@@ -8,7 +8,7 @@ disagree. Wheels are URDF cylinders rotated onto the y axis
 that they stay true cylinders in Bullet. Every link has an ``<inertial>``
 computed from its solid shape.
 
-Frames and joints follow CONTRACT.md. The root link is ``base_link`` with
+Frames and joints follow docs/conventions.md. The root link is ``base_link`` with
 its origin on the floor-projected centre of the base at the height given by
 :func:`base_height` (the pybullet base position is the root's inertial frame,
 so every root inertial sits at the link origin).

@@ -2,7 +2,7 @@
 driven offset casters (Holmberg & Khatib, "Development of a holonomic mobile
 robot for mobile manipulation tasks"; Nomadic XR4000, PR2, Kim & Moon's COMR).
 
-Geometry (frames per CONTRACT.md). Caster ``i`` has its steering axis at
+Geometry (frames and joints: docs/conventions.md). Caster ``i`` has its steering axis at
 ``s_i = h_i (cos beta_i, sin beta_i)`` in base_link, a wheel of radius ``r_i``
 whose ground contact trails the axis by the caster offset ``b_i > 0``, and two
 joints: ``<name>_steer_joint`` = phi_i, the wheel's rolling heading relative

@@ -1,0 +1,163 @@
+"""Every program, every kind of bad input a new user types: ONE line on
+stderr naming the problem, exit status 2, no traceback -- and nothing moves
+(a program that fails on its arguments never starts a controller).
+
+One table per program: (arguments, words the line must contain). Another
+program or option adds its own list and an entry in ``TABLES``. In the
+arguments, ``{bad_yaml}``, ``{typo_yaml}``, ``{junk_mcap}`` and ``{file}``
+stand for files made by the ``inputs`` fixture (``{file}/x``: a path whose
+folder cannot be created, even by root).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from holonomic_core.model import resolve_config
+
+BRINGUP = [
+    ([], "the following arguments are required: robot"),
+    (["hamrr"], "did you mean 'hamr'"),
+    (["hamr", "--driver", "tcp"], "invalid choice: 'tcp'"),
+    (["hamr", "-p", "control_rate"], "-p expects NAME:=VALUE"),
+    (["hamr", "-p", "control_rate:=[1"], "not valid YAML"),
+    (["hamr", "-p", "control_rate:=fast"], "'control_rate' = 'fast': expected a number"),
+    (["hamr", "-p", "sim.wheel_fiction:=0.8"], "did you mean 'sim.wheel_friction'"),
+    (["hamr", "--namespace", "my robot"], "'my robot' is not a ROS namespace"),
+    (["hamr", "--namespace", "1abc"], "'1abc' is not a ROS namespace"),
+    (["hamr", "--params-file", "/nonexistent/params.yaml"], "--params-file: no such file"),
+    (["hamr", "--params-file", "{bad_yaml}"], "expected valid YAML"),
+    (["{typo_yaml}"], "unknown parameter 'ddrot.turet_offset'"),
+    (["hamr", "--gui"], "--gui needs a display"),
+    (["hamr", "--record", "run.bag"], "--record wants a FILE.mcap"),
+    (["hamr", "--record", "{file}/x/run.mcap"], "--record: cannot create the folder"),
+    (["hamr", "--fleet", "0"], "--fleet N must be between 1 and 100"),
+    (["hamr", "--fleet", "two"], "invalid int value: 'two'"),
+    (["hamr", "--fleet", "2", "--namespace", "r"], "own namespace"),
+    (["hamr", "--fleet", "2", "-p", "control_rate:=fast"], "expected a number"),
+]
+
+TELEOP = [
+    (["--speed", "-1"], "--speed: expected a number > 0"),
+    (["--speed", "fast"], "--speed: expected a number > 0, got 'fast'"),
+    (["--turn", "nan"], "--turn: expected a number > 0"),
+    (["--rate", "0"], "--rate: expected a number in (0, 1000]"),
+    (["--key-timeout", "-0.5"], "--key-timeout: expected a number >= 0"),
+    (["--speed", "3"], "must not exceed --max-speed"),
+    (["--namespace", "1abc"], "'1abc' is not a ROS namespace"),
+    (["--colour"], "unrecognized arguments: --colour"),
+    ([], "needs a terminal on stdin"),          # stdin is not a terminal here
+]
+
+CTL = [
+    ([], "the following arguments are required: command"),
+    (["arm"], "invalid choice: 'arm'"),
+    (["enable", "--namespace", "my robot"], "'my robot' is not a ROS namespace"),
+    (["status", "--timeout", "0"], "--timeout: expected a number in (0, 600] s"),
+    (["enable", "--json"], "--json goes with status only"),
+]
+
+PLOT = [
+    ([], "the following arguments are required: recording"),
+    (["/nonexistent/run.mcap"], "no such file: /nonexistent/run.mcap"),
+    (["{junk_mcap}"], "cannot read"),
+    (["{bad_yaml}"], "cannot read"),
+]
+
+ANALYZE = [
+    (["hamrr"], "did you mean 'hamr'"),
+    (["hamr", "--distance", "0"], "--distance: expected a number in (0, 100] m"),
+    (["hamr", "--directions", "1"], "--directions: expected an integer in [2, 360]"),
+    (["hamr", "--turret", "nan"], "--turret: expected a number"),
+    (["xr4000", "--steer", "a,b"], "comma-separated radians"),
+    (["hamr", "-p", "ddrot.turet_offset:=0.2"], "did you mean 'ddrot.turret_offset'"),
+    (["hamr", "--sweep", "ddrot.turret_offset"], "--sweep wants KEY=START:STOP:N"),
+    (["hamr", "--isotropy"], "powered-caster vehicle"),
+    (["hamr", "--plot", "{file}/x"], "cannot write"),
+]
+
+DEMO = [
+    (["--robot", "hamrr"], "did you mean 'hamr'"),
+    (["--robot", "{typo_yaml}"], "unknown parameter 'ddrot.turet_offset'"),
+    (["--out", "{file}/x"], "--out: cannot create"),
+    (["--speed", "2"], "unrecognized arguments: --speed"),
+]
+
+ODOMETRY_EXPERIMENT = [
+    (["--robot", "hamrr"], "did you mean 'hamr'"),
+    (["--seeds", "0"], "--seeds: expected an integer in [1, 10000]"),
+    (["--duration", "-5"], "--duration: expected a number in (0, 3600] s"),
+    (["--condition", "wet"], "expected one of nominal, uneven, slippery, worn"),
+    (["--json", "{file}/x/trials.json"], "--json: cannot write"),
+]
+
+TORQUE_EXPERIMENT = [
+    (["--robot", "hamr"], "needs a powered-caster vehicle"),
+    (["--robot", "xr4001"], "did you mean 'xr4000'"),
+    (["--friction", "0"], "--friction: expected a number in (0, 10]"),
+    (["--markdown", "{file}/x/table.md"], "--markdown: cannot write"),
+]
+
+#: the base controller node alone (``ros2 run holonomic_bringup base_controller``)
+BASE_CONTROLLER = [
+    ([], "robot_config"),
+    (["--ros-args", "-p", "robot_config:=hamrr"], "did you mean 'hamr'"),
+    (["--ros-args", "-p", "robot_config:=hamr", "-p", "cmd_timout:=1.0"],
+     "did you mean 'cmd_timeout'"),
+]
+
+TABLES = {
+    "holonomic-bringup": BRINGUP,
+    "holonomic-teleop": TELEOP,
+    "holonomic-ctl": CTL,
+    "holonomic-plot": PLOT,
+    "holonomic-analyze": ANALYZE,
+    "holonomic-demo": DEMO,
+    "holonomic-odometry-experiment": ODOMETRY_EXPERIMENT,
+    "holonomic-torque-experiment": TORQUE_EXPERIMENT,
+    "base_controller": BASE_CONTROLLER,
+}
+CASES = [(program, argv, words) for program, rows in TABLES.items() for argv, words in rows]
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("bad_input")
+    bad_yaml = folder / "bad.yaml"
+    bad_yaml.write_text("base_controller:\n  ros__parameters: [\n")
+    typo_yaml = folder / "typo.yaml"
+    typo_yaml.write_text(resolve_config("hamr").read_text().replace("turret_offset:",
+                                                                   "turet_offset:", 1))
+    junk = folder / "junk.mcap"
+    junk.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)))
+    plain = folder / "plain_file"
+    plain.write_text("")
+    return {"bad_yaml": bad_yaml, "typo_yaml": typo_yaml, "junk_mcap": junk, "file": plain}
+
+
+def command(program: str) -> list[str]:
+    if program == "base_controller":
+        return [sys.executable, "-c", "import sys; from holonomic_bringup.base_controller_node "
+                "import main; sys.exit(main())"]
+    exe = shutil.which(program)
+    assert exe, f"{program} is not on PATH: run the tests with `make test`"
+    return [exe]
+
+
+@pytest.mark.parametrize("program,argv,words", CASES,
+                         ids=[f"{p} {' '.join(a) or '(none)'}" for p, a, _ in CASES])
+def test_bad_input_gives_one_line_and_exit_2(inputs, tmp_path, program, argv, words):
+    args = [a.format(**inputs) for a in argv]
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.run(command(program) + args, capture_output=True, text=True, timeout=120,
+                          stdin=subprocess.DEVNULL, cwd=tmp_path, env=env)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, proc.stderr
+    assert len(lines) == 1, proc.stderr
+    assert words in lines[0], lines[0]
+    assert "Traceback" not in proc.stdout + proc.stderr
