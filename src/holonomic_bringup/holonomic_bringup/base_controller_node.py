@@ -116,6 +116,7 @@ class BaseControllerNode(Node):
         ``sim`` driver then does not step it). ``start_loop``: False when the
         caller runs :meth:`control_cycle` itself (the fleet's one loop)."""
         super().__init__(NODE_NAME, **kwargs)
+        self._logged_fault: str | None = None
         self._world = world
         self._start_loop = start_loop
         self._instance_lock: InstanceLock | None = None
@@ -261,9 +262,11 @@ class BaseControllerNode(Node):
         if error:
             self.get_logger().warn(error, throttle_duration_sec=1.0)
         elif self.controller.counters["commands_while_disarmed"] != ignored:
+            fault = self.controller.fault
             self.get_logger().warn(
-                f"cmd_vel received while the motors are {self.controller.state.value.upper()}: "
-                "the base does not move (arm with `holonomic-ctl enable` or the ~/enable service)",
+                f"cmd_vel received while the motors are {self.controller.state.value.upper()}"
+                f"{f' ({fault})' if fault else ''}: the base does not move (arm with "
+                "`holonomic-ctl enable` or the ~/enable service)",
                 throttle_duration_sec=5.0)
 
     def _wait(self, future):
@@ -365,6 +368,10 @@ class BaseControllerNode(Node):
         driver_values["implausible_readings"] = str(c.counters["implausible_readings"])
         if c.fault:
             driver_values["fault"] = c.fault
+        if c.fault and c.fault != self._logged_fault:
+            # once per fault: the cause belongs in the log, not only in diagnostics
+            self.get_logger().error(f"motors stopped: {c.fault}")
+        self._logged_fault = c.fault
         loop = self.loop.stats.summary()
         period_ms = 1e3 / self.config.controller.control_rate
         loop_level = DiagnosticStatus.OK if loop["period_p99_ms"] <= 2.0 * period_ms \
