@@ -17,8 +17,8 @@ HEADER = """\
 # direct dependencies are ros-jazzy-rclpy, ros-jazzy-common-interfaces,
 # ros-jazzy-rmw-fastrtps-cpp, ros-jazzy-rosgraph-msgs, ros-jazzy-std-srvs, the
 # rosidl generators and ament_cmake (to build tf2_msgs), numpy, pybullet,
-# pyyaml, matplotlib, python-can, canopen, mcap, mcap-ros2-support,
-# colcon-common-extensions, pytest and hypothesis."""
+# pyyaml, matplotlib, python-can, canopen, mcap, mcap-ros2-support, foxglove-sdk,
+# colcon-common-extensions, pytest, hypothesis and websockets (test client)."""
 
 pins = {}
 for dist in md.distributions():
