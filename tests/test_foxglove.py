@@ -3,6 +3,7 @@ WebSocket client (tests/foxglove_client.py: the protocol written out with
 the `websockets` library, none of the server's code), with a ROS probe
 node driving the robot and watching its ground truth."""
 
+import json
 import math
 import shutil
 import signal
@@ -11,6 +12,7 @@ import subprocess
 import threading
 import time
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +23,9 @@ from holonomic_core.model import load_model
 from ros_probe import Bringup, Probe, wait_until
 
 HAMR = load_model("hamr").kinematics
+LAYOUT = Path(__file__).resolve().parents[1] / "docs" / "foxglove" / "holonomic_base.json"
+#: ROS topics the MCAP recorder writes that the bridge does not serve live
+RECORDED_ONLY = {"/cmd_vel"}
 
 
 def free_port() -> int:
@@ -123,6 +128,46 @@ def test_channels_use_standard_schemas_and_the_server_is_read_only(hamr):
         assert all(s["level"] in (0, 1, 2, 3) for s in diagnostics["status"])
         path = client.wait_for("/path/odom")
         assert path        # a PosesInFrame with at least the start pose
+    finally:
+        client.close()
+
+
+def _panels(node):
+    return [node] if isinstance(node, str) else _panels(node["first"]) + _panels(node["second"])
+
+
+def _plot_paths(layout):
+    return [(panel, p["value"]) for panel, cfg in layout["configById"].items()
+            if panel.startswith("Plot!") for p in cfg["paths"]]
+
+
+def _field(message, path: str):
+    for key in path.split("."):
+        message = message[key]
+    return message
+
+
+def test_the_layout_shows_what_the_bridge_serves(hamr):
+    """docs/foxglove/holonomic_base.json: every panel laid out, every topic
+    served live (or recorded), every plotted field a number in the live data."""
+    probe, proc, port = hamr
+    layout = json.loads(LAYOUT.read_text())
+    assert sorted(_panels(layout["layout"])) == sorted(layout["configById"])
+    three_d = layout["configById"]["3D!robot"]
+    topics = set(three_d["topics"])
+    topics.add(layout["configById"]["DiagnosticSummary!diagnostics"]["topicToRender"])
+    topics.add(layout["configById"]["RawMessages!state"]["topicPath"])
+    plotted = {path.split(".", 1)[0] for _, path in _plot_paths(layout)}
+    assert topics | plotted <= set(SCHEMAS) | {"/slip_residual"} | RECORDED_ONLY
+    assert three_d["followTf"] == "odom"
+    client = connect(port, proc)
+    try:
+        live = sorted(plotted & set(SCHEMAS))
+        client.subscribe(*live)
+        for panel, path in _plot_paths(layout):
+            topic, field = path.split(".", 1)
+            if topic in live:
+                assert isinstance(_field(client.json(topic), field), float), (panel, path)
     finally:
         client.close()
 
@@ -282,6 +327,10 @@ def test_the_casters_steer_and_roll_as_their_joints(ros, start_bringup):
             assert rolled == pytest.approx(dy / caster.wheel_radius, rel=1e-4), caster.name
         residual = client.json("/fox_pcv/slip_residual")
         assert set(residual) == {c.name for c in kin.casters}
+        # the layout's slip plot has a series for each of them
+        slip = {path for panel, path in _plot_paths(json.loads(LAYOUT.read_text()))
+                if panel == "Plot!slip"}
+        assert {f"/slip_residual.{c.name}" for c in kin.casters} <= slip
     finally:
         if client is not None:
             client.close()
