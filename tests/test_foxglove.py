@@ -412,3 +412,35 @@ def test_bad_foxglove_arguments_are_one_line_and_exit_2(args, what):
     result = _bringup("hamr", *args)
     lines = (result.stdout + result.stderr).strip().splitlines()
     assert result.returncode == 2 and len(lines) == 1 and what in lines[0], result
+
+
+def test_client_twists_are_read_as_ros_would_and_garbage_is_refused():
+    from holonomic_bringup.foxglove_bridge import parse_twist_json
+
+    # geometry_msgs/Twist as Foxglove's Teleop panel sends it; missing fields are 0
+    assert parse_twist_json(b'{"linear": {"x": 0.5, "y": -0.25}, "angular": {"z": 1}}') \
+        == (0.5, -0.25, 1.0)
+    assert parse_twist_json(b'{"angular": {"z": -0.5}}') == (0.0, 0.0, -0.5)
+    # TwistStamped: the twist inside
+    assert parse_twist_json(b'{"header": {}, "twist": {"linear": {"x": 0.2}}}') \
+        == (0.2, 0.0, 0.0)
+    for bad in (b"not json", b"[1, 2]", b'{"linear": {"x": "fast"}}',
+                b'{"linear": {"x": true}}', b'{"linear": 3}'):
+        with pytest.raises(ValueError):
+            parse_twist_json(bad)
+
+
+def test_odometry_json_has_the_ros_layout_and_a_planar_covariance():
+    from holonomic_bringup.foxglove_bridge import odometry_message
+
+    cov = ((1.0, 2.0, 3.0), (2.0, 4.0, 5.0), (3.0, 5.0, 6.0))      # over (x, y, yaw)
+    msg = odometry_message(1_500_000_000, "odom", "base_link", (1.0, 2.0, math.pi / 2),
+                           (0.1, 0.2, 0.3), cov, cov)
+    assert msg["header"] == {"stamp": {"sec": 1, "nsec": 500_000_000}, "frame_id": "odom"}
+    q = msg["pose"]["pose"]["orientation"]
+    assert (q["z"], q["w"]) == pytest.approx((math.sqrt(0.5), math.sqrt(0.5)))  # yaw 90 deg
+    assert msg["twist"]["twist"]["angular"]["z"] == 0.3
+    full = np.array(msg["pose"]["covariance"]).reshape(6, 6)
+    # rows/columns x, y, yaw of the 6x6 (x y z roll pitch yaw) = 0, 1, 5
+    assert full[np.ix_([0, 1, 5], [0, 1, 5])].tolist() == [list(r) for r in cov]
+    assert full[2:5, :].sum() == 0.0

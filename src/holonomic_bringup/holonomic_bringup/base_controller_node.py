@@ -393,10 +393,8 @@ class BaseControllerNode(Node):
 
     def _offer_foxglove(self, stamp: TimeMsg, reading, truth) -> None:
         # the loop's whole cost: copy plain numbers and hand over a reference
-        from holonomic_bringup.foxglove_bridge import RobotSnapshot
-
         c, odo = self.controller, self.controller.odometry
-        self._foxglove.offer(RobotSnapshot(
+        self._foxglove.offer(
             stamp_ns=stamp.sec * 1_000_000_000 + stamp.nanosec,
             pose=tuple(odo.pose.tolist()), pose_covariance=tuple(odo.pose_covariance.tolist()),
             twist=tuple(odo.twist.tolist()),
@@ -407,7 +405,7 @@ class BaseControllerNode(Node):
             slip_residual=tuple(np.asarray(odo.residual).tolist()),
             state=c.state.value, fault=c.fault, stale=c.stale, saturation=float(c.saturation),
             truth_pose=None if truth is None else tuple(truth.pose.tolist()),
-            truth_twist=None if truth is None else tuple(truth.twist.tolist())))
+            truth_twist=None if truth is None else tuple(truth.twist.tolist()))
 
     def _publish_diagnostics(self) -> None:
         c = self.controller
@@ -452,11 +450,9 @@ class BaseControllerNode(Node):
             status.hardware_id = robot
         self.diag_pub.publish(DiagnosticArray(header=Header(stamp=now), status=statuses))
         if self._foxglove is not None:
-            from holonomic_bringup.foxglove_bridge import DiagnosticEntry
             self._foxglove.offer_diagnostics(now.sec * 1_000_000_000 + now.nanosec, [
-                DiagnosticEntry(s.name, ord(s.level), s.message, s.hardware_id,
-                                tuple((kv.key, kv.value) for kv in s.values))
-                for s in statuses])
+                (s.name, ord(s.level), s.message, s.hardware_id,
+                 tuple((kv.key, kv.value) for kv in s.values)) for s in statuses])
 
     def _unit_names(self):
         kin = self.config.model.kinematics

@@ -245,11 +245,13 @@ class RobotFeed:
         self._latest: RobotSnapshot | None = None
         self._diagnostics: tuple[int, tuple[DiagnosticEntry, ...]] | None = None
 
-    def offer(self, snapshot: RobotSnapshot) -> None:
-        self._latest = snapshot
+    def offer(self, **state) -> None:
+        """The robot's state now: the fields of :class:`RobotSnapshot`."""
+        self._latest = RobotSnapshot(**state)
 
-    def offer_diagnostics(self, stamp_ns: int, entries: Sequence[DiagnosticEntry]) -> None:
-        self._diagnostics = (stamp_ns, tuple(entries))
+    def offer_diagnostics(self, stamp_ns: int, entries: Sequence[tuple]) -> None:
+        """Diagnostics at ``stamp_ns`` [ns]: the fields of :class:`DiagnosticEntry` each."""
+        self._diagnostics = (stamp_ns, tuple(DiagnosticEntry(*e) for e in entries))
 
     def take(self):
         """(latest snapshot or None, latest diagnostics or None), each once."""
@@ -267,7 +269,7 @@ class _Listener:
         self._client_topics: dict[tuple[int, int], str] = {}
 
     def on_subscribe(self, client, channel) -> None:
-        self._bridge._resend_description.add(channel.topic)
+        self._bridge.subscribed(channel.topic)
 
     def on_unsubscribe(self, client, channel) -> None:
         return None
@@ -281,7 +283,7 @@ class _Listener:
     def on_message_data(self, client, client_channel_id: int, data: bytes) -> None:
         topic = self._client_topics.get((client.id, client_channel_id))
         if topic is not None:
-            self._bridge._client_command(topic, data)
+            self._bridge.client_message(topic, data)
 
 
 class _RobotChannels:
@@ -416,7 +418,8 @@ class FoxgloveBridge:
         self.allow_control = allow_control
         self.context = foxglove.Context()
         self._robots: list[_RobotChannels] = []
-        self._resend_description: set[str] = set()
+        self._resend_description: set[str] = set()     # topics, under _lock
+        self._lock = threading.Lock()
         self._tf = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -464,7 +467,8 @@ class FoxgloveBridge:
 
     def _send(self, paths: bool) -> None:
         now = time.monotonic()
-        resend, self._resend_description = self._resend_description, set()
+        with self._lock:
+            resend, self._resend_description = self._resend_description, set()
         transforms, stamp = [], 0
         for robot in self._robots:
             robot.send_description(now, robot.description.topic() in resend)
@@ -481,8 +485,15 @@ class FoxgloveBridge:
         if transforms:
             self._tf.log(FrameTransforms(transforms=transforms), log_time=stamp)
 
-    def _client_command(self, topic: str, data: bytes) -> None:
-        """A client's message on ``topic``: a Twist for a robot's cmd_vel."""
+    def subscribed(self, topic: str) -> None:
+        """A client subscribed to ``topic`` (server thread): a robot
+        description is sent again at the next tick, not in 5 s."""
+        with self._lock:
+            self._resend_description.add(topic)
+
+    def client_message(self, topic: str, data: bytes) -> None:
+        """A client's message on ``topic`` (server thread; only with
+        allow_control): a Twist for a robot's cmd_vel, else ignored."""
         for robot in self._robots:
             sink = robot.feed.description.command_sink
             if sink is not None and topic.lstrip("/") == robot.topic("cmd_vel").lstrip("/"):
