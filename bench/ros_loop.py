@@ -208,8 +208,10 @@ def foxglove_cost(seconds: float = 30.0, blocks: int = 2, robot: str = "hamr") -
     block as in :func:`loop_at_1khz`."""
     import socket
 
+    import re
+
     runs = {"without": [], "with": []}
-    received = []
+    received, bridge_cpu = [], []
     for block in range(blocks):
         runs["without"].append(_measure_loop([robot], f"bench_fox_off{block}",
                                              "foxglove_off", seconds))
@@ -225,6 +227,12 @@ def foxglove_cost(seconds: float = 30.0, blocks: int = 2, robot: str = "hamr") -
         runs["with"].append(_measure_loop([robot, "--foxglove", str(port)],
                                           f"bench_fox_on{block}", "foxglove_on", seconds,
                                           started=started))
+        # the bringup's last line: "Foxglove bridge: CPU X % of a core ..."
+        log = Path(os.environ.get("BENCH_LOG_DIR", "/tmp")) / "bench_foxglove_on_bringup.log"
+        found = re.search(r"Foxglove bridge: CPU ([0-9.]+) %.*p50 ([0-9.]+) ms, p99 ([0-9.]+) ms",
+                          log.read_text())
+        if found:
+            bridge_cpu.append(tuple(float(v) for v in found.groups()))
 
     def summary(results):
         return {"period_p50_ms": float(np.median([r["period_p50_ms"] for r in results])),
@@ -237,7 +245,11 @@ def foxglove_cost(seconds: float = 30.0, blocks: int = 2, robot: str = "hamr") -
                 "rate_hz": float(np.median([r["rate_hz"] for r in results]))}
     return {"robot": robot, "seconds": seconds, "blocks": blocks,
             "without": summary(runs["without"]), "with": summary(runs["with"]),
-            "messages_per_s": float(np.mean(received)) / seconds if received else 0.0}
+            "messages_per_s": float(np.mean(received)) / seconds if received else 0.0,
+            # the bridge thread's own CPU: share of a core [%], per tick p50, p99 [ms]
+            "bridge_cpu_percent": max(c[0] for c in bridge_cpu) if bridge_cpu else None,
+            "bridge_tick_p50_ms": max(c[1] for c in bridge_cpu) if bridge_cpu else None,
+            "bridge_tick_p99_ms": max(c[2] for c in bridge_cpu) if bridge_cpu else None}
 
 
 PUBLISHER = """

@@ -157,12 +157,16 @@ def format_table(r: dict) -> str:
             f"| Foxglove bridge: 1 kHz loop, simulated {fx['robot']}, without / with "
             f"`--foxglove` and a client subscribed to every channel "
             f"({fx['messages_per_s']:.0f} messages/s), {fx['blocks']} × {fx['seconds']:.0f} s "
-            f"alternating{', ' + fx['when'] if 'when' in fx else ''} | period p99 "
+            f"alternating{', ' + fx['when'] if 'when' in fx else ''} | "
+            f"{off['rate_hz']:.0f} / {on['rate_hz']:.0f} Hz; period p99 "
             f"{off['period_p99_ms_median_window']:.3f} / **{on['period_p99_ms_median_window']:.3f} "
             f"ms** (median window; worst {off['period_p99_ms_worst_window']:.3f} / "
             f"{on['period_p99_ms_worst_window']:.3f} ms), p50 {off['period_p50_ms']:.3f} / "
             f"{on['period_p50_ms']:.3f} ms, max {off['period_max_ms']:.2f} / "
-            f"{on['period_max_ms']:.2f} ms, overruns {off['overruns']} / {on['overruns']} | "
+            f"{on['period_max_ms']:.2f} ms, overruns {off['overruns']} / {on['overruns']}"
+            + (f"; the bridge thread: {fx['bridge_cpu_percent']:.1f} % of a core, "
+               f"{fx['bridge_tick_p50_ms']:.2f} ms a tick (p99 {fx['bridge_tick_p99_ms']:.2f})"
+               if fx.get("bridge_cpu_percent") is not None else "") + " | "
             f"p99 with ≤ p99 without + 0.05 ms | "
             f"{verdict(on['period_p99_ms_median_window'] <= off['period_p99_ms_median_window'] + 0.05)} |")
     m = r["memory"]

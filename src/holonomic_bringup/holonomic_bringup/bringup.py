@@ -143,6 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         return node_main(["holonomic-bringup"] + ros, record=args.record, foxglove=bridge)
     finally:
         if bridge is not None:
+            print(bridge.cost(), file=sys.stderr)
             bridge.close()
 
 

@@ -424,6 +424,10 @@ class FoxgloveBridge:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._warned_at = -math.inf
+        # what sending costs, in this thread's CPU time [s] (tick_cpu: the last ticks)
+        self._started: tuple[float, float] | None = None
+        self._tick_cpu: deque[float] = deque(maxlen=3000)
+        self._cpu_total = 0.0
         listener = _Listener(self)
         try:
             self._server = foxglove.start_server(
@@ -454,16 +458,20 @@ class FoxgloveBridge:
         path_every = max(1, round(SEND_RATE / PATH_RATE))
         tick = 0
         deadline = time.monotonic()
+        self._started = (time.monotonic(), time.thread_time())
         while not self._stop.is_set():
             deadline += period
             self._stop.wait(max(0.0, deadline - time.monotonic()))
             if time.monotonic() - deadline > 1.0:    # fell far behind: do not catch up
                 deadline = time.monotonic()
             tick += 1
+            cpu = time.thread_time()
             try:
                 self._send(tick % path_every == 0)
             except Exception as exc:   # a bridge fault must never reach the robot
                 self._warn(f"foxglove bridge: {exc!r}")
+            self._tick_cpu.append(time.thread_time() - cpu)
+            self._cpu_total = time.thread_time() - self._started[1]
 
     def _send(self, paths: bool) -> None:
         now = time.monotonic()
@@ -509,6 +517,18 @@ class FoxgloveBridge:
         if now - self._warned_at >= 1.0:
             self._warned_at = now
             print(text, file=sys.stderr)
+
+    def cost(self) -> str:
+        """One line: the sending thread's CPU use (its share of one core, and
+        per tick p50/p99 [ms]) since :meth:`start` -- what the bridge takes
+        from the process that runs the control loop."""
+        if self._started is None or not self._tick_cpu:
+            return "Foxglove bridge: not started"
+        ticks = sorted(self._tick_cpu)
+        wall = time.monotonic() - self._started[0]
+        return (f"Foxglove bridge: CPU {100.0 * self._cpu_total / wall:.2f} % of a core over "
+                f"{wall:.0f} s; per tick p50 {1e3 * ticks[len(ticks) // 2]:.3f} ms, "
+                f"p99 {1e3 * ticks[int(0.99 * (len(ticks) - 1))]:.3f} ms")
 
     def summary(self) -> str:
         """One line for the log: where, and what clients may do."""
