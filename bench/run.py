@@ -242,7 +242,9 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   the 1 kHz row, in alternating blocks without and with `--foxglove PORT`; with it, a
   `websockets` client in this process subscribes to every channel and reads everything (what
   the Foxglove app does). Period statistics from the loop's diagnostics, as the 1 kHz row
-  (`bench/ros_loop.py: foxglove_cost`).
+  (`bench/ros_loop.py: foxglove_cost`); a rate well below 1 kHz in both blocks means the
+  machine was busy with other work, and only the difference between the blocks is the bridge's.
+  The bridge thread's CPU is its own `time.thread_time()`, which `holonomic-bringup` logs at exit.
 
 ## Odometry accuracy (XR4000, from docs/odometry_experiment.md)
 

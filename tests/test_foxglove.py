@@ -386,6 +386,22 @@ def test_a_fleet_is_served_under_its_namespaces(start_bringup):
         client.close()
 
 
+def test_on_a_driver_without_ground_truth_no_ground_truth_is_served(start_bringup):
+    port = free_port()
+    proc = start_bringup("hamr", "--driver", "mock", "--namespace", "fox_mock",
+                         "--foxglove", str(port))
+    client = connect(port, proc, "/fox_mock/diagnostics")
+    try:
+        assert set(client.channels) == {"/tf"} | {
+            "/fox_mock" + topic for topic in SCHEMAS if topic != "/tf"} - {
+            "/fox_mock/ground_truth/odom", "/fox_mock/path/ground_truth"}
+        client.subscribe("/tf")
+        wait_until(lambda: "fox_mock/left_wheel" in client.transforms(), 10.0, "the links")
+        assert "fox_mock/base_link_ground_truth" not in client.transforms()
+    finally:
+        client.close()
+
+
 def _bringup(*args: str) -> subprocess.CompletedProcess:
     exe = shutil.which("holonomic-bringup")
     assert exe, "holonomic-bringup is not on PATH: run the tests with `make test`"

@@ -387,7 +387,7 @@ class BaseControllerNode(Node):
             frame_prefix=self.config.values["frame_prefix"], odom_frame=ctrl.odom_frame,
             base_frame=ctrl.base_frame, urdf=self.urdf,
             joint_names=tuple(self.config.model.joint_names),
-            caster_names=tuple(self._unit_names()),
+            caster_names=tuple(self._unit_names()), has_ground_truth=self.gt_pub is not None,
             command_sink=(lambda twist: self._accept(twist, None))
             if bridge.allow_control else None))
 

@@ -54,7 +54,7 @@ from foxglove.messages import (FrameTransform, FrameTransforms, Pose, PosesInFra
                                Timestamp, Vector3)
 from foxglove.websocket import Capability
 
-from holonomic_core.link_transforms import LinkTree
+from holonomic_core.link_transforms import LinkTree, axis_angle
 
 #: the Foxglove app's default port
 DEFAULT_PORT = 8765
@@ -130,11 +130,12 @@ class RobotDescription:
     urdf: str
     joint_names: tuple[str, ...]
     caster_names: tuple[str, ...] = ()
+    has_ground_truth: bool = False      # simulation: serve the true pose, twist, path
     command_sink: Callable[[Planar], None] | None = field(default=None, compare=False)
 
 
 def _yaw_quaternion(yaw: float) -> dict:
-    return {"x": 0.0, "y": 0.0, "z": math.sin(0.5 * yaw), "w": math.cos(0.5 * yaw)}
+    return dict(zip("xyzw", axis_angle((0.0, 0.0, 1.0), yaw)))
 
 
 def _stamp(ns: int) -> dict:
@@ -307,7 +308,10 @@ class _RobotChannels:
 
         self.description = json_channel("robot_description", "std_msgs/msg/String")
         self.odom = json_channel("odom", "nav_msgs/msg/Odometry")
-        self.truth = json_channel("ground_truth/odom", "nav_msgs/msg/Odometry")
+        self.truth = self.truth_path = None
+        if d.has_ground_truth:
+            self.truth = json_channel("ground_truth/odom", "nav_msgs/msg/Odometry")
+            self.truth_path = PosesInFrameChannel(self.topic("path/ground_truth"), context=ctx)
         self.twist_command = json_channel("twist_command", "geometry_msgs/msg/Twist")
         self.joint_states = json_channel("joint_states", "sensor_msgs/msg/JointState")
         self.state = json_channel("controller_state", "holonomic/ControllerState")
@@ -319,7 +323,6 @@ class _RobotChannels:
                 schema=foxglove.Schema(name="holonomic/SlipResidual", encoding="jsonschema",
                                        data=_json_schema({n: _NUMBER for n in d.caster_names})))
         self.odom_path = PosesInFrameChannel(self.topic("path/odom"), context=ctx)
-        self.truth_path = PosesInFrameChannel(self.topic("path/ground_truth"), context=ctx)
         self._paths = {"odom": deque(maxlen=PATH_LENGTH), "truth": deque(maxlen=PATH_LENGTH)}
         self._last_path_pose: dict[str, Planar] = {}
         self._description_sent = -math.inf
@@ -345,7 +348,7 @@ class _RobotChannels:
                                   rotation=Quaternion(**_yaw_quaternion(pose[2])))
 
         out = [planar(self.odom_frame, self.base_frame, s.pose)]
-        if s.truth_pose is not None:
+        if s.truth_pose is not None and self.truth is not None:
             out.append(planar(self.odom_frame, self.truth_frame, s.truth_pose))
         positions = dict(zip(self.joint_names, s.joint_positions))
         for link in self.tree.transforms(positions):
@@ -360,7 +363,7 @@ class _RobotChannels:
         t = s.stamp_ns
         self.odom.log(odometry_message(t, self.odom_frame, self.base_frame, s.pose, s.twist,
                                        s.pose_covariance, s.twist_covariance), log_time=t)
-        if s.truth_pose is not None:
+        if s.truth_pose is not None and self.truth is not None:
             self.truth.log(odometry_message(t, self.odom_frame, self.truth_frame, s.truth_pose,
                                             s.truth_twist or (0.0, 0.0, 0.0)), log_time=t)
         self.twist_command.log(_twist(s.twist_command), log_time=t)
@@ -374,7 +377,7 @@ class _RobotChannels:
             self.slip.log(dict(zip(self.feed.description.caster_names, s.slip_residual)),
                           log_time=t)
         self._grow_path("odom", s.pose)
-        if s.truth_pose is not None:
+        if s.truth_pose is not None and self.truth is not None:
             self._grow_path("truth", s.truth_pose)
 
     def _grow_path(self, which: str, pose: Planar) -> None:
@@ -389,7 +392,7 @@ class _RobotChannels:
     def send_paths(self, stamp_ns: int) -> None:
         sec, nsec = divmod(stamp_ns, 1_000_000_000)
         for which, channel in (("odom", self.odom_path), ("truth", self.truth_path)):
-            if self._paths[which]:
+            if channel is not None and self._paths[which]:
                 channel.log(PosesInFrame(timestamp=Timestamp(sec, nsec), frame_id=self.odom_frame,
                                          poses=list(self._paths[which])), log_time=stamp_ns)
 
