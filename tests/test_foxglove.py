@@ -102,7 +102,7 @@ def series(messages, child):
 
 def test_channels_use_standard_schemas_and_the_server_is_read_only(hamr):
     probe, proc, port = hamr
-    client = connect(port, proc)
+    client = connect(port, proc, *SCHEMAS)     # a robot's channels appear one by one
     try:
         info = client.server_info
         # no clientPublish, services or parameters: nothing a client can change
@@ -390,11 +390,11 @@ def test_on_a_driver_without_ground_truth_no_ground_truth_is_served(start_bringu
     port = free_port()
     proc = start_bringup("hamr", "--driver", "mock", "--namespace", "fox_mock",
                          "--foxglove", str(port))
-    client = connect(port, proc, "/fox_mock/diagnostics")
+    expected = {"/tf"} | {"/fox_mock" + topic for topic in SCHEMAS if topic != "/tf"} - {
+        "/fox_mock/ground_truth/odom", "/fox_mock/path/ground_truth"}
+    client = connect(port, proc, *expected)
     try:
-        assert set(client.channels) == {"/tf"} | {
-            "/fox_mock" + topic for topic in SCHEMAS if topic != "/tf"} - {
-            "/fox_mock/ground_truth/odom", "/fox_mock/path/ground_truth"}
+        assert set(client.channels) == expected
         client.subscribe("/tf")
         wait_until(lambda: "fox_mock/left_wheel" in client.transforms(), 10.0, "the links")
         assert "fox_mock/base_link_ground_truth" not in client.transforms()
