@@ -420,6 +420,8 @@ def test_foxglove_on_a_port_in_use_is_one_line_and_exit_2():
     (("--foxglove", "8765", "--foxglove-host", "no.such.host.invalid"), "no.such.host"),
     (("--foxglove-allow-control",), "need --foxglove"),
     (("--foxglove", "70000"), "1..65535"),
+    # a bad config: its own one line, nothing about Foxglove
+    (("--foxglove", str(free_port()), "-p", "cmd_timeout:=-1"), "cmd_timeout"),
 ])
 def test_bad_foxglove_arguments_are_one_line_and_exit_2(args, what):
     result = _bringup("hamr", *args)

@@ -143,7 +143,8 @@ def main(argv: list[str] | None = None) -> int:
         return node_main(["holonomic-bringup"] + ros, record=args.record, foxglove=bridge)
     finally:
         if bridge is not None:
-            print(bridge.cost(), file=sys.stderr)
+            if bridge.cost() is not None:       # it ran: say what it cost
+                print(bridge.cost(), file=sys.stderr)
             bridge.close()
 
 

@@ -521,12 +521,12 @@ class FoxgloveBridge:
             self._warned_at = now
             print(text, file=sys.stderr)
 
-    def cost(self) -> str:
+    def cost(self) -> str | None:
         """One line: the sending thread's CPU use (its share of one core, and
         per tick p50/p99 [ms]) since :meth:`start` -- what the bridge takes
-        from the process that runs the control loop."""
+        from the process that runs the control loop. None before a first tick."""
         if self._started is None or not self._tick_cpu:
-            return "Foxglove bridge: not started"
+            return None
         ticks = sorted(self._tick_cpu)
         wall = time.monotonic() - self._started[0]
         return (f"Foxglove bridge: CPU {100.0 * self._cpu_total / wall:.2f} % of a core over "
