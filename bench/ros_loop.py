@@ -69,15 +69,25 @@ def loop_at_1khz(seconds: float = 60.0, robot: str = "hamr") -> dict:
     with cmd_vel at 100 Hz in and odom at 50 Hz out; the loop's own period
     statistics, read from its diagnostics once a second (each covers the
     last 2000 cycles), and the overruns during the measurement."""
+    return {"robot": robot,
+            **_measure_loop([robot, "--driver", "mock"], "bench_loop", "loop", seconds)}
+
+
+def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
+                  started=None) -> dict:
+    """The loop statistics of ``holonomic-bringup ARGS --enable`` at 1 kHz in
+    namespace ``ns``, driven by cmd_vel at 100 Hz for ``seconds``.
+    ``started(proc)``: called once the robot publishes, before measuring;
+    it returns a function called after the measurement (or None)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
 
-    ns = "bench_loop"
-    proc, log = _start_bringup([robot, "--driver", "mock", "--enable", "--namespace", ns,
-                                "-p", "control_rate:=1000.0", "-p", "publish_rate:=50.0"], "loop")
-    node = rclpy.create_node("bench_loop_client")
+    proc, log = _start_bringup([*args, "--enable", "--namespace", ns,
+                                "-p", "control_rate:=1000.0", "-p", "publish_rate:=50.0"], name)
+    node = rclpy.create_node(f"{ns}_client")
+    after = None
     windows, odom_count = [], [0]
     latest = {}
 
@@ -99,6 +109,8 @@ def loop_at_1khz(seconds: float = 60.0, robot: str = "hamr") -> dict:
             time.sleep(0.1)
         if not windows:
             raise RuntimeError("the robot did not publish diagnostics within 30 s")
+        if started is not None:
+            after = started(proc)
         windows.clear()
         overruns_before = int(latest["overruns"])
         odom_count[0] = 0
@@ -115,12 +127,14 @@ def loop_at_1khz(seconds: float = 60.0, robot: str = "hamr") -> dict:
         elapsed = time.monotonic() - t0
         time.sleep(1.2)              # one more diagnostics message
     finally:
+        if after is not None:
+            after()
         finish()
         node.destroy_node()
         _stop_bringup(proc, log)
     p99 = [float(w["period_p99_ms"]) for w in windows]
     p50 = [float(w["period_p50_ms"]) for w in windows]
-    return {"robot": robot, "seconds": seconds, "windows": len(windows),
+    return {"seconds": seconds, "windows": len(windows),
             "rate_hz": float(np.median([float(w["rate_hz"]) for w in windows])),
             "period_p50_ms": float(np.median(p50)),
             "period_p99_ms_worst_window": max(p99),
@@ -132,6 +146,110 @@ def loop_at_1khz(seconds: float = 60.0, robot: str = "hamr") -> dict:
             "overruns": int(latest["overruns"]) - overruns_before,
             "odom_hz": odom_count[0] / elapsed,
             "cmd_hz": k / elapsed}
+
+
+def _foxglove_watcher(port: int):
+    """A Foxglove client (``websockets``) subscribed to every channel,
+    draining messages in a thread, as the Foxglove app would; returns
+    stop() -> number of messages received."""
+    import json
+
+    from websockets.sync.client import connect
+
+    deadline = time.monotonic() + 30.0
+    while True:
+        try:
+            ws = connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"],
+                         max_size=None, legacy=True)
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+    channels, stop, count = {}, threading.Event(), [0]
+    end = time.monotonic() + 5.0        # collect the advertisements
+    while time.monotonic() < end:
+        try:
+            frame = ws.recv(timeout=0.5)
+        except TimeoutError:
+            continue
+        if isinstance(frame, str):
+            msg = json.loads(frame)
+            if msg["op"] == "advertise":
+                channels.update({c["id"]: c["topic"] for c in msg["channels"]})
+    ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+        {"id": k, "channelId": cid} for k, cid in enumerate(channels)]}))
+
+    def drain():
+        while not stop.is_set():
+            try:
+                ws.recv(timeout=0.2)
+                count[0] += 1
+            except TimeoutError:
+                continue
+            except Exception:
+                return
+
+    thread = threading.Thread(target=drain, daemon=True)
+    thread.start()
+
+    def finish() -> int:
+        stop.set()
+        thread.join(2.0)
+        ws.close()
+        return count[0]
+    return finish
+
+
+def foxglove_cost(seconds: float = 30.0, blocks: int = 2, robot: str = "hamr") -> dict:
+    """The 1 kHz loop of the simulated robot without and with ``--foxglove``
+    (a client subscribed to every channel), in alternating blocks of
+    ``seconds``; each block its own bringup. Loop period statistics of each
+    block as in :func:`loop_at_1khz`."""
+    import socket
+
+    import re
+
+    runs = {"without": [], "with": []}
+    received, bridge_cpu = [], []
+    for block in range(blocks):
+        runs["without"].append(_measure_loop([robot], f"bench_fox_off{block}",
+                                             "foxglove_off", seconds))
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        holder = {}
+
+        def started(proc, port=port):
+            holder["finish"] = _foxglove_watcher(port)
+            return lambda: received.append(holder["finish"]())
+
+        runs["with"].append(_measure_loop([robot, "--foxglove", str(port)],
+                                          f"bench_fox_on{block}", "foxglove_on", seconds,
+                                          started=started))
+        # the bringup's last line: "Foxglove bridge: CPU X % of a core ..."
+        log = Path(os.environ.get("BENCH_LOG_DIR", "/tmp")) / "bench_foxglove_on_bringup.log"
+        found = re.search(r"Foxglove bridge: CPU ([0-9.]+) %.*p50 ([0-9.]+) ms, p99 ([0-9.]+) ms",
+                          log.read_text())
+        if found:
+            bridge_cpu.append(tuple(float(v) for v in found.groups()))
+
+    def summary(results):
+        return {"period_p50_ms": float(np.median([r["period_p50_ms"] for r in results])),
+                "period_p99_ms_median_window": float(np.median(
+                    [r["period_p99_ms_median_window"] for r in results])),
+                "period_p99_ms_worst_window": max(r["period_p99_ms_worst_window"]
+                                                  for r in results),
+                "period_max_ms": max(r["period_max_ms"] for r in results),
+                "overruns": sum(r["overruns"] for r in results),
+                "rate_hz": float(np.median([r["rate_hz"] for r in results]))}
+    return {"robot": robot, "seconds": seconds, "blocks": blocks,
+            "without": summary(runs["without"]), "with": summary(runs["with"]),
+            "messages_per_s": float(np.mean(received)) / seconds if received else 0.0,
+            # the bridge thread's own CPU: share of a core [%], per tick p50, p99 [ms]
+            "bridge_cpu_percent": max(c[0] for c in bridge_cpu) if bridge_cpu else None,
+            "bridge_tick_p50_ms": max(c[1] for c in bridge_cpu) if bridge_cpu else None,
+            "bridge_tick_p99_ms": max(c[2] for c in bridge_cpu) if bridge_cpu else None}
 
 
 PUBLISHER = """

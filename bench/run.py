@@ -96,6 +96,8 @@ def main(argv=None) -> int:
         results["latency"] = step("command latency", ros_loop.command_latency,
                                   1000 if quick else 5000)
         results["memory"] = step("memory", ros_loop.memory_growth, 75.0 if quick else 240.0)
+        results["foxglove"] = step("foxglove bridge cost", ros_loop.foxglove_cost,
+                                   10.0 if quick else 30.0, 1 if quick else 2)
     finally:
         rclpy.try_shutdown()
     elapsed = time.monotonic() - started
@@ -148,6 +150,25 @@ def format_table(r: dict) -> str:
     factors = ", ".join(f"{n}: {x:.1f}×" for n, x in f["realtime_factor"].items())
     rows.append(f"| fleet, {f['robot']}, one world, a controller each | real-time factor by N: "
                 f"{factors}; **largest N at ≥ 1×: {f['largest_n_realtime']}** | report | — |")
+    fx = r.get("foxglove")
+    if fx is not None:
+        off, on = fx["without"], fx["with"]
+        rows.append(
+            f"| Foxglove bridge: 1 kHz loop, simulated {fx['robot']}, without / with "
+            f"`--foxglove` and a client subscribed to every channel "
+            f"({fx['messages_per_s']:.0f} messages/s), {fx['blocks']} × {fx['seconds']:.0f} s "
+            f"alternating{', ' + fx['when'] if 'when' in fx else ''} | "
+            f"{off['rate_hz']:.0f} / {on['rate_hz']:.0f} Hz; period p99 "
+            f"{off['period_p99_ms_median_window']:.3f} / **{on['period_p99_ms_median_window']:.3f} "
+            f"ms** (median window; worst {off['period_p99_ms_worst_window']:.3f} / "
+            f"{on['period_p99_ms_worst_window']:.3f} ms), p50 {off['period_p50_ms']:.3f} / "
+            f"{on['period_p50_ms']:.3f} ms, max {off['period_max_ms']:.2f} / "
+            f"{on['period_max_ms']:.2f} ms, overruns {off['overruns']} / {on['overruns']}"
+            + (f"; the bridge thread: {fx['bridge_cpu_percent']:.1f} % of a core, "
+               f"{fx['bridge_tick_p50_ms']:.2f} ms a tick (p99 {fx['bridge_tick_p99_ms']:.2f})"
+               if fx.get("bridge_cpu_percent") is not None else "") + " | "
+            f"p99 with ≤ p99 without + 0.05 ms | "
+            f"{verdict(on['period_p99_ms_median_window'] <= off['period_p99_ms_median_window'] + 0.05)} |")
     m = r["memory"]
     rows.append(
         f"| memory, simulated bringup driven {m['seconds']:.0f} s | RSS {m['rss_start_mb']:.1f} → "
@@ -217,6 +238,13 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   cycle), no ROS.
 - **Memory**: `holonomic-bringup hamr --enable` (simulator) driven by `cmd_vel` at 20 Hz for the
   whole run; RSS from `/proc` every 10 s.
+- **Foxglove bridge**: `holonomic-bringup hamr -p control_rate:=1000.0` (simulator) driven as
+  the 1 kHz row, in alternating blocks without and with `--foxglove PORT`; with it, a
+  `websockets` client in this process subscribes to every channel and reads everything (what
+  the Foxglove app does). Period statistics from the loop's diagnostics, as the 1 kHz row
+  (`bench/ros_loop.py: foxglove_cost`); a rate well below 1 kHz in both blocks means the
+  machine was busy with other work, and only the difference between the blocks is the bridge's.
+  The bridge thread's CPU is its own `time.thread_time()`, which `holonomic-bringup` logs at exit.
 
 ## Odometry accuracy (XR4000, from docs/odometry_experiment.md)
 

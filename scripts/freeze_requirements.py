@@ -17,9 +17,10 @@ HEADER = """\
 # direct dependencies are ros-jazzy-rclpy, ros-jazzy-common-interfaces,
 # ros-jazzy-rmw-fastrtps-cpp, ros-jazzy-rosgraph-msgs, ros-jazzy-std-srvs, the
 # rosidl generators and ament_cmake (to build tf2_msgs), numpy, pybullet,
-# pyyaml, matplotlib, python-can, canopen, mcap, mcap-ros2-support,
-# colcon-common-extensions, pytest, hypothesis, and for the tests only cantools
-# and odrive-can (which ships ODrive's CANSimple DBC files)."""
+# pyyaml, matplotlib, python-can, canopen, mcap, mcap-ros2-support, foxglove-sdk,
+# colcon-common-extensions, pytest, hypothesis, and for the tests only cantools,
+# odrive-can (which ships ODrive's CANSimple DBC files) and websockets (an
+# independent Foxglove client)."""
 
 pins = {}
 for dist in md.distributions():

@@ -5,7 +5,10 @@ Parameters -> a validated RobotConfig -> driver + BaseController; messages in
 ``BaseController.step`` at ``control_rate`` and publishes odometry, /tf,
 joint states, diagnostics (and, with the simulator, ground truth and /clock)
 from the same thread, decimated to ``publish_rate`` / 1 Hz. The robot's URDF
-(the one the simulator is built from) is latched on ``robot_description``.
+(the one the simulator is built from) is latched on ``robot_description``;
+with ``publish_link_tf`` every link's transform (from the measured joint
+positions) goes on /tf too. :meth:`BaseControllerNode.attach_foxglove` hands
+the same state to a Foxglove bridge (``--foxglove``).
 
 The robot's YAML is named by the ``robot_config`` parameter (a config name or
 a path); every key of it can be overridden with ROS parameters
@@ -41,6 +44,7 @@ from tf2_msgs.msg import TFMessage
 
 from holonomic_core.controller import BaseController, ControllerState, config_from_flat
 from holonomic_core.driver import DriverError
+from holonomic_core.link_transforms import LinkTree
 from holonomic_core.loop import ControlLoop
 from holonomic_core.model import read_params_file, resolve_config
 from holonomic_core.schema import ConfigError, ParamSpec
@@ -160,6 +164,7 @@ class BaseControllerNode(Node):
         prefix = self.config.values["frame_prefix"]
         self._odom_frame, self._base_frame = prefix + ctrl.odom_frame, prefix + ctrl.base_frame
         self._publish_tf = ctrl.publish_tf
+        self._foxglove = None   # a foxglove_bridge.RobotFeed, see attach_foxglove
         self._publish_every = max(1, round(ctrl.control_rate / ctrl.publish_rate))
         self._clock_every = max(1, round(ctrl.control_rate / 250.0))
         self._diag_every = max(1, round(ctrl.control_rate))
@@ -225,7 +230,8 @@ class BaseControllerNode(Node):
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.description_pub = self.create_publisher(String, "robot_description", latched)
-        self.description_pub.publish(String(data=generate_urdf(self.config.model)))
+        self.urdf = generate_urdf(self.config.model)
+        self.description_pub.publish(String(data=self.urdf))
         self.create_service(Trigger, "~/reset_odometry", self._on_reset_odometry)
         self.create_service(SetBool, "~/enable", self._on_enable)
 
@@ -235,6 +241,16 @@ class BaseControllerNode(Node):
         self._tf = TransformStamped()
         self._tf.header.frame_id = self._odom_frame
         self._tf.child_frame_id = self._base_frame
+        # publish_link_tf: one TransformStamped per URDF joint, reused each cycle
+        self._link_tree = LinkTree.from_urdf(self.urdf) if ctrl.publish_link_tf else None
+        self._link_tfs = []
+        if self._link_tree is not None:
+            prefix = self.config.values["frame_prefix"]
+            for joint in self._link_tree.joints:
+                tf = TransformStamped()
+                tf.header.frame_id = prefix + joint.parent
+                tf.child_frame_id = prefix + joint.child
+                self._link_tfs.append(tf)
         self._joint_msg = JointState()
         self._joint_msg.name = list(self.config.model.joint_names)
 
@@ -324,26 +340,42 @@ class BaseControllerNode(Node):
         msg.twist.twist.angular.z = float(odo.twist[2])
         _fill_covariance(msg.twist.covariance, odo.twist_covariance)
         self.odom_pub.publish(msg)
+        transforms = []
         if self._publish_tf:
             tf = self._tf
             tf.header.stamp = stamp
             tf.transform.translation.x = x
             tf.transform.translation.y = y
             _yaw_quaternion(tf.transform.rotation, yaw)
-            self.tf_pub.publish(TFMessage(transforms=[tf]))
+            transforms.append(tf)
+        if self._link_tree is not None:
+            transforms += self._link_transforms(stamp, reading.positions)
+        if transforms:
+            self.tf_pub.publish(TFMessage(transforms=transforms))
         joints = self._joint_msg
         joints.header.stamp = stamp
         joints.position = reading.positions.tolist()
         joints.velocity = reading.velocities.tolist()
         joints.effort = [] if np.all(np.isnan(reading.efforts)) else reading.efforts.tolist()
         self.joint_pub.publish(joints)
-        if self.gt_pub is not None:
-            self._publish_ground_truth(stamp)
+        truth = self.driver.ground_truth() if self.gt_pub is not None else None
+        if truth is not None:
+            self._publish_ground_truth(stamp, truth)
+        if self._foxglove is not None:
+            self._offer_foxglove(stamp, reading, truth)
 
-    def _publish_ground_truth(self, stamp: TimeMsg) -> None:
-        truth = self.driver.ground_truth()
-        if truth is None:
-            return
+    def _link_transforms(self, stamp: TimeMsg, positions) -> list[TransformStamped]:
+        """publish_link_tf: parent -> child of every URDF joint at ``positions`` [rad]."""
+        links = self._link_tree.transforms(dict(zip(self.config.model.joint_names,
+                                                    positions.tolist())))
+        for tf, link in zip(self._link_tfs, links):
+            tf.header.stamp = stamp
+            t, q = tf.transform.translation, tf.transform.rotation
+            t.x, t.y, t.z = link.translation
+            q.x, q.y, q.z, q.w = link.rotation
+        return self._link_tfs
+
+    def _publish_ground_truth(self, stamp: TimeMsg, truth) -> None:
         msg = OdometryMsg()
         msg.header.stamp = stamp
         msg.header.frame_id = self._odom_frame
@@ -355,6 +387,39 @@ class BaseControllerNode(Node):
         msg.twist.twist.linear.y = float(truth.twist[1])
         msg.twist.twist.angular.z = float(truth.twist[2])
         self.gt_pub.publish(msg)
+
+    # -- Foxglove -------------------------------------------------------------------
+    def attach_foxglove(self, bridge) -> None:
+        """Serve this robot on a ``foxglove_bridge.FoxgloveBridge``; with its
+        ``allow_control``, client Twists on cmd_vel go to :meth:`_accept`."""
+        from holonomic_bringup.foxglove_bridge import RobotDescription
+
+        ctrl = self.config.controller
+        namespace = self.get_namespace()
+        self._foxglove = bridge.add_robot(RobotDescription(
+            namespace="" if namespace == "/" else namespace,
+            frame_prefix=self.config.values["frame_prefix"], odom_frame=ctrl.odom_frame,
+            base_frame=ctrl.base_frame, urdf=self.urdf,
+            joint_names=tuple(self.config.model.joint_names),
+            caster_names=tuple(self._unit_names()), has_ground_truth=self.gt_pub is not None,
+            command_sink=(lambda twist: self._accept(twist, None))
+            if bridge.allow_control else None))
+
+    def _offer_foxglove(self, stamp: TimeMsg, reading, truth) -> None:
+        # the loop's whole cost: copy plain numbers and hand over a reference
+        c, odo = self.controller, self.controller.odometry
+        self._foxglove.offer(
+            stamp_ns=stamp.sec * 1_000_000_000 + stamp.nanosec,
+            pose=tuple(odo.pose.tolist()), pose_covariance=tuple(odo.pose_covariance.tolist()),
+            twist=tuple(odo.twist.tolist()),
+            twist_covariance=tuple(odo.twist_covariance.tolist()),
+            twist_command=tuple(c.twist_command.tolist()),
+            joint_positions=tuple(reading.positions.tolist()),
+            joint_velocities=tuple(reading.velocities.tolist()),
+            slip_residual=tuple(np.asarray(odo.residual).tolist()),
+            state=c.state.value, fault=c.fault, stale=c.stale, saturation=float(c.saturation),
+            truth_pose=None if truth is None else tuple(truth.pose.tolist()),
+            truth_twist=None if truth is None else tuple(truth.twist.tolist()))
 
     def _publish_diagnostics(self) -> None:
         c = self.controller
@@ -401,6 +466,10 @@ class BaseControllerNode(Node):
         for status in statuses:
             status.hardware_id = robot
         self.diag_pub.publish(DiagnosticArray(header=Header(stamp=now), status=statuses))
+        if self._foxglove is not None:
+            self._foxglove.offer_diagnostics(now.sec * 1_000_000_000 + now.nanosec, [
+                (s.name, ord(s.level), s.message, s.hardware_id,
+                 tuple((kv.key, kv.value) for kv in s.values)) for s in statuses])
 
     def _command_status(self, values) -> DiagnosticStatus:
         c = self.controller
@@ -446,10 +515,12 @@ class BaseControllerNode(Node):
             self._instance_lock.release()
 
 
-def main(argv: list[str] | None = None, record: str | None = None) -> int:
+def main(argv: list[str] | None = None, record: str | None = None, foxglove=None) -> int:
     """Run the node until SIGINT/SIGTERM; exit 0 after stopping the motors.
 
-    ``record``: an MCAP file to record the robot's topics to. Exit 2 with a
+    ``record``: an MCAP file to record the robot's topics to; ``foxglove``: a
+    listening ``foxglove_bridge.FoxgloveBridge`` to serve the robot on (the
+    caller closes it). Exit 2 with a
     one-line message on an invalid configuration, 3 when the same controller
     already runs (same namespace and ROS domain).
     """
@@ -499,6 +570,10 @@ def main(argv: list[str] | None = None, record: str | None = None) -> int:
                 print(f"{NODE_NAME}: cannot record to {record}: {exc}", file=sys.stderr)
                 return 2
             node.get_logger().info(f"recording to {record}")
+        if foxglove is not None:
+            node.attach_foxglove(foxglove)
+            foxglove.start()
+            node.get_logger().info(foxglove.summary())
         while not STOP.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
     finally:

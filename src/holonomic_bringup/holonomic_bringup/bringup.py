@@ -49,6 +49,18 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="record cmd_vel, odom, /tf, joint_states, ground_truth/odom, "
                              "diagnostics and robot_description to an MCAP file "
                              "(Foxglove, ros2 bag, holonomic-plot)")
+    fox = parser.add_argument_group(
+        "Foxglove", "a Foxglove WebSocket server in this process (docs/foxglove.md). The "
+                    "protocol has no authentication: anyone who reaches the port sees the robot.")
+    fox.add_argument("--foxglove", nargs="?", type=int, const=8765, metavar="PORT",
+                     help="serve the robot live to Foxglove on PORT (default 8765): URDF, "
+                          "every link's transform, paths, twists, slip, diagnostics")
+    fox.add_argument("--foxglove-host", default="127.0.0.1", metavar="ADDR",
+                     help="address to listen on (default 127.0.0.1: this machine only; "
+                          "0.0.0.0 serves every network the robot is on)")
+    fox.add_argument("--foxglove-allow-control", action="store_true",
+                     help="let Foxglove clients publish cmd_vel (geometry_msgs/Twist JSON). "
+                          "Default: read-only (no client publishing, services or parameters)")
     args = parser.parse_args(argv)
     check_args(parser, args)
     return args
@@ -89,6 +101,25 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
             parser.error(f"--record: the folder {str(folder)!r} is not writable")
     if args.gui and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         parser.error("--gui needs a display (DISPLAY is not set); run headless without --gui")
+
+
+def start_foxglove(args: argparse.Namespace):
+    """The Foxglove bridge the arguments ask for, listening; None without
+    --foxglove. Raises SystemExit(2) with one line when it cannot start."""
+    if args.foxglove is None:
+        if args.foxglove_allow_control or args.foxglove_host != "127.0.0.1":
+            raise SystemExit("holonomic-bringup: --foxglove-host and --foxglove-allow-control "
+                             "need --foxglove")
+        return None
+    if not 1 <= args.foxglove <= 65535:
+        raise SystemExit(f"holonomic-bringup: --foxglove PORT must be 1..65535, "
+                         f"got {args.foxglove}")
+    from holonomic_bringup.foxglove_bridge import BridgeError, FoxgloveBridge
+    try:
+        return FoxgloveBridge(args.foxglove_host, args.foxglove,
+                              allow_control=args.foxglove_allow_control)
+    except BridgeError as exc:
+        raise SystemExit(f"holonomic-bringup: {exc}") from None
 
 
 def ros_arguments(args: argparse.Namespace) -> list[str]:
@@ -144,9 +175,23 @@ def main(argv: list[str] | None = None) -> int:
         if problem:
             print(f"holonomic-bringup: --fleet {problem}", file=sys.stderr)
             return 2
-        from holonomic_bringup.fleet import run_fleet
-        return run_fleet(args.robot, args.fleet, args.param, args.enable, args.record)
-    return node_main(["holonomic-bringup"] + ros, record=args.record)
+    # Before any driver opens: a port in use stops here, with nothing moved.
+    try:
+        bridge = start_foxglove(args)
+    except SystemExit as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    try:
+        if args.fleet is not None:
+            from holonomic_bringup.fleet import run_fleet
+            return run_fleet(args.robot, args.fleet, args.param, args.enable, args.record,
+                             foxglove=bridge)
+        return node_main(["holonomic-bringup"] + ros, record=args.record, foxglove=bridge)
+    finally:
+        if bridge is not None:
+            if bridge.cost() is not None:       # it ran: say what it cost
+                print(bridge.cost(), file=sys.stderr)
+            bridge.close()
 
 
 if __name__ == "__main__":

@@ -40,8 +40,11 @@ def start_poses(count: int, spacing: float = SPACING) -> list[tuple[float, float
 
 
 def run_fleet(robot: str, count: int, params: list[str], enable: bool,
-              record: str | None = None) -> int:
-    """Run the fleet until SIGINT/SIGTERM; exit code as holonomic-bringup."""
+              record: str | None = None, foxglove=None) -> int:
+    """Run the fleet until SIGINT/SIGTERM; exit code as holonomic-bringup.
+
+    ``foxglove``: a listening Foxglove bridge that serves every robot (each
+    under its namespace); the caller closes it."""
     from holonomic_bringup.base_controller_node import BaseControllerNode
     from holonomic_sim.world import SimWorld
 
@@ -114,6 +117,11 @@ def run_fleet(robot: str, count: int, params: list[str], enable: bool,
             except OSError as exc:
                 print(f"holonomic-bringup: cannot record to {record}: {exc}", file=sys.stderr)
                 return 2
+        if foxglove is not None:
+            for node in nodes:
+                node.attach_foxglove(foxglove)
+            foxglove.start()
+            nodes[0].get_logger().info(foxglove.summary())
         nodes[0].get_logger().info(
             f"fleet of {count} {cfg.model.name} in one simulated world: namespaces "
             + ", ".join(n.get_namespace() for n in nodes))

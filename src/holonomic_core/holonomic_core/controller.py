@@ -99,6 +99,11 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "Prefix of odom_frame and base_frame, e.g. 'robot1/' for one robot of several "
               "(holonomic-bringup --namespace NS sets 'NS/').", default=""),
     ParamSpec("publish_tf", "bool", "Publish odom -> base_link on /tf.", default=True),
+    ParamSpec("publish_link_tf", "bool",
+              "Also publish every URDF link's transform on /tf, from the measured joint "
+              "positions (wheels, turret, casters), for rviz where no robot_state_publisher "
+              "runs (a pip-only install). Off by default: on a full ROS install "
+              "robot_state_publisher does this from joint_states.", default=False),
     ParamSpec("cmd_vel_stamped", "bool",
               "Subscribe cmd_vel as geometry_msgs/TwistStamped instead of Twist.", default=False),
     ParamSpec("enable_on_start", "bool",
@@ -147,6 +152,7 @@ class ControllerConfig:
     odom_frame: str
     base_frame: str
     publish_tf: bool
+    publish_link_tf: bool
     cmd_vel_stamped: bool
     enable_on_start: bool
     control_mode: str
@@ -174,7 +180,8 @@ class ControllerConfig:
             driver=v["driver"], control_rate=v["control_rate"], publish_rate=v["publish_rate"],
             cmd_timeout=v["cmd_timeout"], estimator=v["estimator"],
             odom_frame=v["odom_frame"], base_frame=v["base_frame"],
-            publish_tf=v["publish_tf"], cmd_vel_stamped=v["cmd_vel_stamped"],
+            publish_tf=v["publish_tf"], publish_link_tf=v["publish_link_tf"],
+            cmd_vel_stamped=v["cmd_vel_stamped"],
             enable_on_start=v["enable_on_start"], control_mode=v["control_mode"],
             torque_kp=tuple(v["torque.kp"]), torque_kv=tuple(v["torque.kv"]),
             max_velocity=tuple(v[f"limits.{a}.max_velocity"] for a in axes),

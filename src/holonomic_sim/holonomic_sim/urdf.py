@@ -8,10 +8,14 @@ disagree. Wheels are URDF cylinders rotated onto the y axis
 that they stay true cylinders in Bullet. Every link has an ``<inertial>``
 computed from its solid shape.
 
-Frames and joints follow docs/conventions.md. The root link is ``base_link`` with
-its origin on the floor-projected centre of the base at the height given by
-:func:`base_height` (the pybullet base position is the root's inertial frame,
-so every root inertial sits at the link origin).
+Frames and joints follow docs/conventions.md and REP 120's footprint convention: the
+root link ``base_link`` has its origin *on the floor*, under the centre of the
+base, so that the planar odom -> base_link transform draws the robot standing
+on the floor of the odom frame (rviz, Foxglove). The body that carries the
+payload (turret disc, chassis box) is base_link's own visual, collision and
+inertial, raised by :func:`base_height`. pybullet reports a base at its
+inertial frame, not at the URDF link origin: :mod:`holonomic_sim.world`
+converts (``SimRobot.world_pose``).
 """
 
 from __future__ import annotations
@@ -125,7 +129,7 @@ def _limits(model, joint: str):
 
 # -- DDROT ---------------------------------------------------------------------
 def ddrot_base_height(model) -> float:
-    """Height [m] of base_link's origin (the turret disc's centre) above the floor."""
+    """Height [m] of the turret disc's centre above the floor (and base_link)."""
     p = model.params
     r = model.kinematics.r
     return r + p["body.drive_base.height"] / 2 + _GAP + p["body.turret.height"] / 2
@@ -134,8 +138,8 @@ def ddrot_base_height(model) -> float:
 def ddrot_urdf(model) -> str:
     """URDF of a differential drive with an offset turret.
 
-    ``base_link`` (root) is the turret disc, origin on the turret axis.
-    ``turret_joint`` (axis -z, so its angle is the turret's angle relative to
+    ``base_link`` (root) is the turret disc, origin on the turret axis on the
+    floor, the disc at :func:`ddrot_base_height`. ``turret_joint`` (axis -z, so its angle is the turret's angle relative to
     the drive base, CCW positive) carries ``drive_base``, whose frame is on
     the turret axis at axle height with x along the drive base's forward
     axis; the axle midpoint is ``b`` behind the turret axis. The wheels roll
@@ -150,10 +154,12 @@ def ddrot_urdf(model) -> str:
     r_t, h_t, m_t = p["body.turret.radius"], p["body.turret.height"], p["body.turret.mass"]
     m_w, w_w = p["body.wheel.mass"], p["body.wheel.width"]
     r_s = p["body.support.radius"]
-    z_axle = r - ddrot_base_height(model)       # axle height in base_link
+    z_axle = r                                   # axle height in base_link (on the floor)
+    z_turret = ddrot_base_height(model)
     parts = [
-        '<link name="base_link">' + _inertial(m_t, Inertia.cylinder_z(m_t, r_t, h_t))
-        + _both(_cylinder(r_t, h_t), material="top") + "</link>",
+        '<link name="base_link">'
+        + _inertial(m_t, Inertia.cylinder_z(m_t, r_t, h_t), (0, 0, z_turret))
+        + _both(_cylinder(r_t, h_t), (0, 0, z_turret), material="top") + "</link>",
     ]
     # Drive base: box centred on the axle midpoint, plus the support balls at
     # its front and back ends. Only the ball on the side of the centre of mass
@@ -189,7 +195,7 @@ def ddrot_urdf(model) -> str:
 
 # -- PCV -------------------------------------------------------------------------
 def pcv_base_height(model) -> float:
-    """Height [m] of base_link's origin (the chassis box's centre) above the floor."""
+    """Height [m] of the chassis box's centre above the floor (and base_link)."""
     p = model.params
     return float(model.kinematics.r.max()) + p["body.fork.height"] + p["body.chassis.height"] / 2
 
@@ -197,7 +203,8 @@ def pcv_base_height(model) -> float:
 def pcv_urdf(model) -> str:
     """URDF of a powered-caster vehicle.
 
-    ``base_link`` (root) is the chassis box. Caster ``NAME``:
+    ``base_link`` (root, origin on the floor) carries the chassis box, its
+    centre at :func:`pcv_base_height`. Caster ``NAME``:
     ``NAME_steer_joint`` (axis +z, at the steering axis on the chassis bottom)
     carries ``NAME_fork``, whose x axis is the wheel's rolling heading;
     ``NAME_wheel_joint`` (axis +y, positive rolls forward) sits ``b`` behind
@@ -212,8 +219,9 @@ def pcv_urdf(model) -> str:
     m_c, m_f = p["body.chassis.mass"], p["body.fork.mass"]
     m_w, w_w = p["body.wheel.mass"], p["body.wheel.width"]
     height = pcv_base_height(model)
-    parts = ['<link name="base_link">' + _inertial(m_c, Inertia.box(m_c, length, width, h_c))
-             + _both(_box(length, width, h_c), material="body") + "</link>"]
+    parts = ['<link name="base_link">'
+             + _inertial(m_c, Inertia.box(m_c, length, width, h_c), (0, 0, height))
+             + _both(_box(length, width, h_c), (0, 0, height), material="body") + "</link>"]
     for caster in k.casters:
         r, b = caster.wheel_radius, caster.caster_offset
         drop = height - h_c / 2 - r              # steering joint to wheel axle [m]
@@ -226,7 +234,7 @@ def pcv_urdf(model) -> str:
         effort, velocity = _limits(model, caster.steer_joint)
         x, y = caster.axis
         parts.append(_joint(caster.steer_joint, "continuous", "base_link", fork,
-                            (x, y, -h_c / 2), (0, 0, 1), effort, velocity))
+                            (x, y, height - h_c / 2), (0, 0, 1), effort, velocity))
         parts.append(f'<link name="{wheel}">' + _inertial(m_w, Inertia.cylinder_y(m_w, r, w_w))
                      + _wheel_shapes(r, w_w) + "</link>")
         effort, velocity = _limits(model, caster.wheel_joint)
@@ -252,7 +260,8 @@ def generate_urdf(model) -> str:
 
 
 def base_height(model) -> float:
-    """Height [m] at which base_link's origin rests above a flat floor."""
+    """Height [m] of the base body's centre (base_link's inertial origin) above
+    the floor; base_link's own origin is on the floor."""
     return GENERATORS[model.kind][1](model)
 
 

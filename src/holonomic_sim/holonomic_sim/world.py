@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as pb
 
-from holonomic_sim.urdf import base_height, frictionless_links, generate_urdf
+from holonomic_core.link_transforms import rotate
+from holonomic_sim.urdf import frictionless_links, generate_urdf
 
 
 class SimError(RuntimeError):
@@ -67,13 +68,17 @@ class SimRobot:
             with open(path, "w") as handle:
                 handle.write(urdf)
             try:
+                # loadURDF places the root link's URDF origin (on the floor)
                 self.body = pb.loadURDF(
-                    path, [start.x, start.y, base_height(model)],
+                    path, [start.x, start.y, 0.0],
                     pb.getQuaternionFromEuler([0.0, 0.0, start.yaw]),
                     flags=pb.URDF_USE_IMPLICIT_CYLINDER | pb.URDF_USE_INERTIA_FROM_FILE,
                     physicsClientId=cid)
             except pb.error as exc:
                 raise SimError(f"pybullet could not load the generated URDF: {exc}") from exc
+        # pybullet's base pose is the root's inertial frame (the body above
+        # the floor); base_link's URDF origin is this offset below it.
+        self._com_in_link = tuple(pb.getDynamicsInfo(self.body, -1, physicsClientId=cid)[3])
         joints_by_name, links_by_name = {}, {}
         for index in range(pb.getNumJoints(self.body, physicsClientId=cid)):
             info = pb.getJointInfo(self.body, index, physicsClientId=cid)
@@ -146,11 +151,17 @@ class SimRobot:
         efforts = self._efforts.copy() if self._torque_mode else np.array(columns[3])
         return positions, velocities, efforts
 
+    def _com_offset(self, orientation) -> tuple[float, float, float]:
+        """World-frame vector [m] from base_link's origin to its inertial origin."""
+        return rotate(orientation, self._com_in_link)
+
     def world_pose(self) -> tuple[float, float, float]:
-        """base_link's planar pose in the world [m, m, rad]."""
+        """base_link's planar pose in the world [m, m, rad] (its URDF origin,
+        on the floor, not pybullet's inertial base frame)."""
         position, orientation = pb.getBasePositionAndOrientation(
             self.body, physicsClientId=self.world.client)
-        return position[0], position[1], _yaw_of(orientation)
+        offset = self._com_offset(orientation)
+        return position[0] - offset[0], position[1] - offset[1], _yaw_of(orientation)
 
     def pose(self) -> np.ndarray:
         """base_link's planar pose relative to its start pose (the odom frame)."""
@@ -158,8 +169,14 @@ class SimRobot:
 
     def body_twist(self) -> np.ndarray:
         """(vx, vy, wz) of base_link in base_link [m/s, m/s, rad/s]."""
-        linear, angular = pb.getBaseVelocity(self.body, physicsClientId=self.world.client)
-        yaw = self.world_pose()[2]
+        com_linear, angular = pb.getBaseVelocity(self.body, physicsClientId=self.world.client)
+        _, orientation = pb.getBasePositionAndOrientation(self.body,
+                                                          physicsClientId=self.world.client)
+        # velocity of base_link's origin: v_com - w x (p_com - p_origin)
+        r = self._com_offset(orientation)
+        linear = (com_linear[0] - (angular[1] * r[2] - angular[2] * r[1]),
+                  com_linear[1] - (angular[2] * r[0] - angular[0] * r[2]))
+        yaw = _yaw_of(orientation)
         c, s = math.cos(yaw), math.sin(yaw)
         return np.array([c * linear[0] + s * linear[1], -s * linear[0] + c * linear[1],
                          angular[2]])
