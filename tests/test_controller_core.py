@@ -202,3 +202,20 @@ def test_invalid_configuration_names_the_key(overrides, key):
 def test_unknown_robot_name_lists_the_known_ones():
     with pytest.raises(ConfigError, match="hamr"):
         load_config("no_such_robot")
+
+
+def test_non_zero_commands_while_disarmed_are_counted_and_reported_for_a_while():
+    ctrl, driver, clock = make()
+    run(ctrl, clock, 2)
+    ctrl.set_command((0.0, 0.0, 0.0))           # a teleop idling: nothing to report
+    assert ctrl.counters["commands_while_disarmed"] == 0
+    assert not ctrl.commanded_while_disarmed(2.0)
+    ctrl.set_command((0.3, 0.0, 0.0))
+    assert ctrl.counters["commands_while_disarmed"] == 1
+    clock.t += 1.9
+    assert ctrl.commanded_while_disarmed(2.0)   # the diagnostics' 2 s window
+    clock.t += 0.2
+    assert not ctrl.commanded_while_disarmed(2.0)
+    arm(ctrl, clock)
+    ctrl.set_command((0.3, 0.0, 0.0))           # armed: the base follows, nothing to report
+    assert ctrl.counters["commands_while_disarmed"] == 1

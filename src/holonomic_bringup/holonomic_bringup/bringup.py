@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from holonomic_bringup.process_guard import install_signal_handlers
 from holonomic_bringup.ros_names import namespace
@@ -68,11 +69,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """What argparse cannot check alone; exits 2 with one line (parser.error)."""
+    import yaml
+
     from holonomic_core.model import read_params_file
     from holonomic_core.schema import ConfigError
-    from pathlib import Path
 
-    import yaml
     for item in args.param:
         name, _, value = item.partition(":=")
         if ":=" not in item or not name:
