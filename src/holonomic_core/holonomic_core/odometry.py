@@ -171,16 +171,21 @@ class Odometry:
             return False
         dq = positions - self._last_positions
         mid = self._last_positions + 0.5 * dq
-        # One fit of the displacement gives both; the fit is linear in the
-        # joint motion, so the residual of dq over dt is the rate residual.
-        disp, residual = self.model.kinematics.estimate(mid, dq, self.estimator)
         dt = stamp - self._last_stamp
         slip_dt = 0.0
         if dt > 0.0:
-            self.residual = residual / dt
-            self.slip = (math.sqrt(float(np.dot(self.residual, self.residual)) / residual.size)
+            # Fit the mean rates, not the displacement: slip_min and pinv are
+            # linear in the joint motion, but the robust estimator's
+            # thresholds are speeds [m/s]. The displacement is rate x dt.
+            rate_twist, residual = self.model.kinematics.estimate(mid, dq / dt, self.estimator)
+            disp = rate_twist * dt
+            self.residual = residual
+            self.slip = (math.sqrt(float(np.dot(residual, residual)) / residual.size)
                          if residual.size else 0.0)
             slip_dt = self.slip * dt
+        else:
+            # a repeated or backward stamp: no rate, but the motion is real
+            disp = self.model.kinematics.forward(mid, dq, self.estimator)
         self._integrate(disp, slip_dt)
         self._last_positions = np.array(positions, dtype=float)
         self._last_stamp = stamp
