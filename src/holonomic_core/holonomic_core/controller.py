@@ -115,13 +115,13 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("odometry.angular_variance_per_meter", "double",
               "Heading variance added per metre travelled [rad^2/m].",
               default=4e-4, minimum=0.0, maximum=1.0),
-    ParamSpec("odometry.slip_variance_per_meter", "double",
-              "Position variance added per metre of contact slip the estimator could not "
-              "explain (RMS residual x time) [m^2/m].",
-              default=0.0, minimum=0.0, maximum=100.0),
-    ParamSpec("odometry.slip_angular_variance_per_meter", "double",
-              "Heading variance added per metre of unexplained contact slip [rad^2/m].",
-              default=0.0, minimum=0.0, maximum=100.0),
+    ParamSpec("odometry.slip_position_gain", "double",
+              "Position variance added per squared RMS contact residual the estimator could "
+              "not explain, per second [s] (m^2 per (m/s)^2 s).",
+              default=0.0, minimum=0.0, maximum=1e4),
+    ParamSpec("odometry.slip_heading_gain", "double",
+              "Heading variance added per squared RMS contact residual, per second [s/m^2] "
+              "(rad^2 per (m/s)^2 s).", default=0.0, minimum=0.0, maximum=1e6),
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
               "[(m/s)^2, (m/s)^2, (rad/s)^2].",
@@ -211,8 +211,8 @@ class ControllerConfig:
             noise=OdometryNoise(v["odometry.linear_variance_per_meter"],
                                 v["odometry.angular_variance_per_radian"],
                                 v["odometry.angular_variance_per_meter"],
-                                v["odometry.slip_variance_per_meter"],
-                                v["odometry.slip_angular_variance_per_meter"],
+                                v["odometry.slip_position_gain"],
+                                v["odometry.slip_heading_gain"],
                                 tuple(v["odometry.twist_variance"]),
                                 tuple(v["odometry.twist_slip_gain"]),
                                 tuple(v["odometry.twist_lag_gain"])),

@@ -21,7 +21,7 @@ Over one cycle it is the plain difference of two readings.
 
 Covariance (see :class:`OdometryNoise`): each increment adds variance that
 grows with the distance and angle it covers and with the contact slip the
-estimator could not explain (residual x time = metres of unexplained slip),
+estimator could not explain (squared residual x time),
 propagated through the pose composition's Jacobian. The coefficients come
 from ``holonomic-odometry-experiment --calibrate`` (ground truth in the
 simulator, or whatever reference a user has on their floor).
@@ -71,10 +71,15 @@ class OdometryNoise:
     velocity unexplained (RMS over the wheel units) for ``dt`` [s]:
 
     * position variance, isotropic in x, y [m^2]:
-      ``linear_variance_per_meter * dist + slip_variance_per_meter * rho * dt``;
+      ``linear_variance_per_meter * dist + slip_position_gain * rho^2 * dt``;
     * heading variance [rad^2]: ``angular_variance_per_radian * |dtheta| +
-      angular_variance_per_meter * dist + slip_angular_variance_per_meter *
-      rho * dt``.
+      angular_variance_per_meter * dist + slip_heading_gain * rho^2 * dt``.
+
+    The slip terms are those of a velocity error of std ~rho with a
+    correlation time: ``slip_position_gain`` [s] (twice the correlation
+    time, times the squared ratio of twist error to residual),
+    ``slip_heading_gain`` [s/m^2]. They make the covariance scale with the
+    slip level (sigma ~ rho), which a term linear in rho does not.
 
     Twist covariance, diagonal (vx, vy, wz) [(m/s)^2, (m/s)^2, (rad/s)^2]:
     ``twist_variance + twist_slip_gain * rho^2 + twist_lag_gain * (a lag)^2``
@@ -87,8 +92,8 @@ class OdometryNoise:
     linear_variance_per_meter: float = 4e-4
     angular_variance_per_radian: float = 1e-3
     angular_variance_per_meter: float = 4e-4
-    slip_variance_per_meter: float = 0.0
-    slip_angular_variance_per_meter: float = 0.0
+    slip_position_gain: float = 0.0
+    slip_heading_gain: float = 0.0
     twist_variance: tuple[float, float, float] = (4e-4, 4e-4, 1e-3)
     twist_slip_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
     twist_lag_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -182,7 +187,7 @@ class Odometry:
             self.residual = residual
             self.slip = (math.sqrt(float(np.dot(residual, residual)) / residual.size)
                          if residual.size else 0.0)
-            slip_dt = self.slip * dt
+            slip_dt = self.slip * self.slip * dt
         else:
             # a repeated or backward stamp: no rate, but the motion is real
             disp = self.model.kinematics.forward(mid, dq, self.estimator)
@@ -236,9 +241,9 @@ class Odometry:
         dist = math.hypot(dx, dy)
         self.distance += dist
         n = self.noise
-        var_lin = n.linear_variance_per_meter * dist + n.slip_variance_per_meter * slip_dt
+        var_lin = n.linear_variance_per_meter * dist + n.slip_position_gain * slip_dt
         var_ang = (n.angular_variance_per_radian * abs(dth) + n.angular_variance_per_meter * dist
-                   + n.slip_angular_variance_per_meter * slip_dt)
+                   + n.slip_heading_gain * slip_dt)
         if var_lin == 0.0 and var_ang == 0.0:
             return
         # P' = F P F^T + G Q G^T with F = [[1, 0, -wy], [0, 1, wx], [0, 0, 1]]
