@@ -89,14 +89,14 @@ class OdometryNoise:
     ``twist_lag_gain`` is [-].
     """
 
-    linear_variance_per_meter: float = 4e-4
-    angular_variance_per_radian: float = 1e-3
-    angular_variance_per_meter: float = 4e-4
+    linear_variance_per_meter: float = 5.31e-12
+    angular_variance_per_radian: float = 8.1e-4
+    angular_variance_per_meter: float = 1.35e-11
     slip_position_gain: float = 0.0
     slip_heading_gain: float = 0.0
-    twist_variance: tuple[float, float, float] = (4e-4, 4e-4, 1e-3)
-    twist_slip_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    twist_lag_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    twist_variance: tuple[float, float, float] = (6.84e-6, 3.45e-6, 0.0)
+    twist_slip_gain: tuple[float, float, float] = (0.627, 0.545, 19.5)
+    twist_lag_gain: tuple[float, float, float] = (0.484, 0.509, 1.08)
 
 
 class Odometry:
