@@ -125,7 +125,7 @@ class Samples:
         mask = np.ones(len(self.error), bool) if mask is None else mask
         P = self.pose_covariance(noise)[mask]
         e = self.error[mask]
-        d2 = _mahalanobis2(e[:, :2], P[:, :2, :2])
+        d2 = mahalanobis2(e[:, :2], P[:, :2, :2])
         hdg = np.abs(e[:, 2]) <= Z_95 * np.sqrt(P[:, 2, 2])
         tv = self.twist_variance(noise)[mask]
         tw = np.abs(self.twist_error[mask]) <= Z_95 * np.sqrt(tv)
@@ -134,7 +134,7 @@ class Samples:
                 "wz": float(np.mean(tw[:, 2])), "samples": int(mask.sum())}
 
 
-def _mahalanobis2(e: np.ndarray, P: np.ndarray) -> np.ndarray:
+def mahalanobis2(e: np.ndarray, P: np.ndarray) -> np.ndarray:
     """e^T P^-1 e for (K, 2) errors and (K, 2, 2) covariances (2x2 inverse by hand)."""
     a, b, d = P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]
     det = np.maximum(a * d - b * b, 1e-30)
@@ -223,7 +223,7 @@ def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
     p_bases = [samples.bases[k][:, :2, :2] for k in POSITION_KEYS]
 
     p = _fit_covariances(fixed, p_bases, e[:, :2])
-    s = _scale_to_coverage(lambda f: _mahalanobis2(
+    s = _scale_to_coverage(lambda f: mahalanobis2(
         e[:, :2], fixed + f * sum(ci * b for ci, b in zip(p, p_bases))) <= CHI2_2_95, g)
     noise = replace(noise, **dict(zip(POSITION_KEYS, (p * s).tolist())))
     # twist, per axis j: var_j = tv_j + gs_j rho^2 + gl_j L_j^2
@@ -292,7 +292,7 @@ def plot(samples: Samples, noise: OdometryNoise, path: str, title: str) -> None:
         # below the line <=> inside the 95 % ellipse
         ("position", np.linalg.norm(e[:, :2], axis=1) * 1e3,
          np.linalg.norm(e[:, :2], axis=1) / np.sqrt(np.maximum(
-             _mahalanobis2(e[:, :2], P[:, :2, :2]), 1e-30)) * 1e3, math.sqrt(CHI2_2_95),
+             mahalanobis2(e[:, :2], P[:, :2, :2]), 1e-30)) * 1e3, math.sqrt(CHI2_2_95),
          "sigma of the ellipse along the error [mm]", "|position error| [mm]"),
         ("heading", np.degrees(np.abs(e[:, 2])), np.degrees(np.sqrt(P[:, 2, 2])), Z_95,
          "sigma [deg]", "|heading error| [deg]"),
