@@ -155,6 +155,23 @@ def test_one_wheel_burst_is_rejected_by_robust():
         assert np.argmax(res) == wheel // 2 and np.sum(res > 1e-6) == 1
 
 
+def test_robust_leave_one_out_is_the_least_squares_fit_of_the_other_casters():
+    """The closed-form deletion formulas against a plain least-squares fit of
+    C_p without the rejected caster's rows, on noisy data with one burst."""
+    rng = np.random.default_rng(9)
+    kin = load_model("xr4000").kinematics
+    for _ in range(30):
+        q = rng.uniform(-math.pi, math.pi, 8)
+        twist = rng.normal(0, 0.5, 3)
+        contact = kin.contact_jacobian(q) @ twist + rng.normal(0, 0.002, 8)
+        bad = rng.integers(4)
+        contact[2 * bad:2 * bad + 2] += rng.uniform(0.3, 1.0) * rng.choice([-1, 1], 2)
+        rates = kin.contact_to_joint(q) @ contact
+        keep = [k for k in range(8) if k // 2 != bad]
+        expected = np.linalg.lstsq(kin.contact_jacobian(q)[keep], contact[keep], rcond=None)[0]
+        np.testing.assert_allclose(kin.forward(q, rates, "robust"), expected, atol=1e-9)
+
+
 def test_robust_matches_slip_min_under_small_noise():
     rng = np.random.default_rng(5)
     kin = load_model("comr3").kinematics

@@ -177,7 +177,7 @@ class Odometry:
         dq = positions - self._last_positions
         mid = self._last_positions + 0.5 * dq
         dt = stamp - self._last_stamp
-        slip_dt = 0.0
+        slip2_dt = 0.0
         if dt > 0.0:
             # Fit the mean rates, not the displacement: slip_min and pinv are
             # linear in the joint motion, but the robust estimator's
@@ -187,11 +187,11 @@ class Odometry:
             self.residual = residual
             self.slip = (math.sqrt(float(np.dot(residual, residual)) / residual.size)
                          if residual.size else 0.0)
-            slip_dt = self.slip * self.slip * dt
+            slip2_dt = self.slip * self.slip * dt
         else:
             # a repeated or backward stamp: no rate, but the motion is real
             disp = self.model.kinematics.forward(mid, dq, self.estimator)
-        self._integrate(disp, slip_dt)
+        self._integrate(disp, slip2_dt)
         self._last_positions = np.array(positions, dtype=float)
         self._last_stamp = stamp
         if dt > 0.0:
@@ -231,7 +231,8 @@ class Odometry:
             for base, gain, lag_gain, a in zip(n.twist_variance, n.twist_slip_gain,
                                                n.twist_lag_gain, accel.tolist()))
 
-    def _integrate(self, disp: np.ndarray, slip_dt: float) -> None:
+    def _integrate(self, disp: np.ndarray, slip2_dt: float) -> None:
+        """Compose the displacement; grow the covariance (slip2_dt: rho^2 dt [m^2/s])."""
         dx, dy, dth = disp.tolist()
         x, y, heading = self.pose.tolist()
         wx, wy = compose_arc((x, y, heading), dx, dy, dth)
@@ -241,9 +242,9 @@ class Odometry:
         dist = math.hypot(dx, dy)
         self.distance += dist
         n = self.noise
-        var_lin = n.linear_variance_per_meter * dist + n.slip_position_gain * slip_dt
+        var_lin = n.linear_variance_per_meter * dist + n.slip_position_gain * slip2_dt
         var_ang = (n.angular_variance_per_radian * abs(dth) + n.angular_variance_per_meter * dist
-                   + n.slip_heading_gain * slip_dt)
+                   + n.slip_heading_gain * slip2_dt)
         if var_lin == 0.0 and var_ang == 0.0:
             return
         # P' = F P F^T + G Q G^T with F = [[1, 0, -wy], [0, 1, wx], [0, 0, 1]]

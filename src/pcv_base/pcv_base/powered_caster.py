@@ -352,10 +352,10 @@ class PoweredCasterKinematics(BaseKinematics):
         if estimator == "pinv":
             C = self.constraint_matrix(positions)
             twist = np.linalg.lstsq(C, velocities, rcond=None)[0]
-            _, res, _, _ = self._fit(positions, velocities)
-            # residual of pinv's twist: the slip_min residual plus the rigid
+            fitted, res, _, _ = self._fit(positions, velocities)
+            # residual of pinv's twist: the slip_min residual minus the rigid
             # field of the two twists' difference
-            dvx, dvy, dwz = (twist - self._slip_min(positions, velocities)[0]).tolist()
+            dvx, dvy, dwz = (twist - np.array(fitted)).tolist()
             return twist, np.array([math.hypot(rx - (dvx - dwz * y), ry - (dvy + dwz * x))
                                     for x, y, rx, ry in res])
         raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
