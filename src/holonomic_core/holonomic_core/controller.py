@@ -127,7 +127,7 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
               "[(m/s)^2, (m/s)^2, (rad/s)^2].",
-              default=(6.84e-6, 3.45e-6, 0.0), minimum=0.0, maximum=100.0, min_length=3),
+              default=(6.84e-6, 3.45e-6, 1e-9), minimum=0.0, maximum=100.0, min_length=3),
     ParamSpec("odometry.twist_slip_gain", "double_array",
               "Twist variance (vx, vy, wz) added per (m/s)^2 of squared RMS contact residual "
               "[-, -, 1/m^2].", default=(0.627, 0.545, 19.5), minimum=0.0, maximum=1e4,

@@ -94,7 +94,7 @@ class OdometryNoise:
     angular_variance_per_meter: float = 1.35e-11
     slip_position_gain: float = 0.0
     slip_heading_gain: float = 0.0
-    twist_variance: tuple[float, float, float] = (6.84e-6, 3.45e-6, 0.0)
+    twist_variance: tuple[float, float, float] = (6.84e-6, 3.45e-6, 1e-9)
     twist_slip_gain: tuple[float, float, float] = (0.627, 0.545, 19.5)
     twist_lag_gain: tuple[float, float, float] = (0.484, 0.509, 1.08)
 

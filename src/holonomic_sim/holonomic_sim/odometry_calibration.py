@@ -44,6 +44,8 @@ Z_95 = 1.96
 #: coverage the scale step gives the worst floor (the target band is 90-99.5 %)
 TARGET_COVERAGE = 0.95
 SAMPLE_PERIOD = 0.1          # [s]
+#: smallest calibrated twist variance [(m/s)^2, (rad/s)^2]
+TWIST_VARIANCE_FLOOR = 1e-9
 WARM_UP = 1.0                # [s] before the first sample
 
 
@@ -238,6 +240,9 @@ def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
         c = c * _scale_to_coverage(lambda f: np.abs(te[:, j]) <= Z_95 * np.sqrt(f * var), g)
         coeffs.append(c)
     coeffs = np.array(coeffs)
+    # a variance of exactly 0 (at rest the encoders are exact) makes a fusion
+    # filter's innovation covariance singular: keep a floor
+    coeffs[:, 0] = np.maximum(coeffs[:, 0], TWIST_VARIANCE_FLOOR)
     return replace(noise, twist_variance=tuple(coeffs[:, 0].tolist()),
                    twist_slip_gain=tuple(coeffs[:, 1].tolist()),
                    twist_lag_gain=tuple(coeffs[:, 2].tolist()))
