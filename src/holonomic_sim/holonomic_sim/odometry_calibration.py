@@ -267,7 +267,14 @@ def noise_yaml(noise: OdometryNoise, twist_window: float) -> str:
     """The ``odometry:`` block of a config file for ``noise``."""
     def g(v):
         # coefficients the fit drove to nothing print as 0
-        return "0" if abs(v) < 1e-15 else f"{v:.3g}"
+        if abs(v) < 1e-15:
+            return "0.0"
+        text = f"{v:.3g}"
+        # YAML 1.1 (PyYAML, rcl) reads 1e-09 as a string: a float needs a dot
+        if "." not in text:
+            mantissa, _, exponent = text.partition("e")
+            text = f"{mantissa}.0" + (f"e{exponent}" if exponent else "")
+        return text
     return "\n".join([
         "    odometry:",
         f"      twist_window: {g(twist_window)}",
