@@ -9,7 +9,9 @@ readings, and fits the ``odometry.*`` covariance parameters exactly as
 ``holonomic-odometry-experiment --calibrate`` does (same code:
 ``holonomic_sim.odometry_calibration``). Prints the coverage before and
 after and the block to paste into the config file. Drive the way the robot
-will be driven (speeds, turns, the floors it will see) for a few minutes.
+will be driven (speeds, turns, the floors it will see) for a few minutes,
+with ``publish_rate`` equal to ``control_rate``: the replay runs at the rate
+of the recorded ``joint_states``.
 
 The reference's own frame does not matter: poses are taken relative to the
 reference's first pose. Its twist must be in base_link (as nav_msgs/Odometry
