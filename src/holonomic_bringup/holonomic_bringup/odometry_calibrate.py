@@ -43,10 +43,15 @@ def recording_from_mcap(path: Path, namespace: str = "", reference_topic: str = 
         robots, series, _ = load(path)
     except Exception as exc:  # a truncated or foreign file: say so, no traceback
         raise ConfigError("FILE", str(path), f"an MCAP recording ({exc})") from exc
-    if namespace not in robots:
+    # the recorder keys robots by their namespace as ROS writes it ("/rec", "")
+    wanted = {namespace, "/" + namespace.strip("/")} if namespace.strip("/") else {"", "/"}
+    found = [ns for ns in robots if ns in wanted]
+    if not found and not namespace and len(robots) == 1:
+        found = list(robots)
+    if not found:
         raise ConfigError("--namespace", namespace, f"one of the recorded robots {sorted(robots)}")
-    cfg = config_from_flat(robots[namespace], str(path))
-    prefix = f"/{namespace}" if namespace else ""
+    cfg = config_from_flat(robots[found[0]], str(path))
+    prefix = "/" + found[0].strip("/") if found[0].strip("/") else ""
     joints = series.get(f"{prefix}/joint_states") or series.get("joint_states") or []
     reference = (series.get(reference_topic) or series.get(f"/{reference_topic}")
                  or series.get(f"{prefix}/{reference_topic}") or [])
