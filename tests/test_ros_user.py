@@ -123,16 +123,24 @@ def test_recording_holds_every_topic_and_the_plot_reads_it(ros, tmp_path):
     assert "final_position_error_m" in proc.stdout and "max_slip_residual_m_s" in proc.stdout
     for name in ("run_rec_motion.png", "run_rec_slip.png"):
         assert (out / name).stat().st_size > 20_000
+    # the same recording calibrates the odometry covariance (a real floor:
+    # another reference topic); 2 s of driving is only a smoke test of the path
+    proc = run(sys.executable, "-c", "import sys; from holonomic_bringup.odometry_calibrate "
+               "import main; sys.exit(main(sys.argv[1:]))", str(bag), "--namespace", "rec")
+    assert proc.returncode == 0, proc.stderr
+    assert "calibrated coverage" in proc.stdout and "linear_variance_per_meter" in proc.stdout
 
 
 def test_plot_refuses_a_file_that_is_not_a_recording(tmp_path):
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"\x89MCAP0\r\n" + os.urandom(200))
     code = "import sys; from holonomic_bringup.recording_plot import main; sys.exit(main(sys.argv[1:]))"
+    calibrate = code.replace("recording_plot", "odometry_calibrate")
     for path in (junk, tmp_path / "missing.mcap"):
-        proc = run(sys.executable, "-c", code, str(path))
-        assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
-        assert str(path) in proc.stderr
+        for program in (code, calibrate):
+            proc = run(sys.executable, "-c", program, str(path))
+            assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+            assert str(path) in proc.stderr
 
 
 # -- several robots ------------------------------------------------------------------------

@@ -26,6 +26,7 @@ setup(
             "holonomic-teleop = holonomic_bringup.teleop:main",
             "holonomic-plot = holonomic_bringup.recording_plot:main",
             "holonomic-ctl = holonomic_bringup.ctl:main",
+            "holonomic-odometry-calibrate = holonomic_bringup.odometry_calibrate:main",
             "base_controller = holonomic_bringup.base_controller_node:main",
         ],
     },

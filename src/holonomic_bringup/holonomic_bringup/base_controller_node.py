@@ -453,6 +453,16 @@ class BaseControllerNode(Node):
         odo_values = {"estimator": odo.estimator, "distance_m": f"{odo.distance:.3f}"}
         for name, value in zip(self._unit_names(), odo.residual):
             odo_values[f"slip_residual_{name}_m_s"] = f"{value:.4f}"
+        # a caster above the threshold for a while: WARN naming it
+        slipping = c.slip_monitor.slipping(c.reading.stamp) if c.reading is not None else []
+        limits = c.slip_monitor.limits
+        odo_level, odo_message = DiagnosticStatus.OK, f"{odo.estimator}, {odo.distance:.2f} m"
+        if slipping:
+            odo_level = DiagnosticStatus.WARN
+            odo_message = "slipping: " + ", ".join(
+                f"caster {name} residual above {limits.threshold:g} m/s for {seconds:.1f} s"
+                for name, seconds in slipping)
+            odo_values["slipping_casters"] = " ".join(name for name, _ in slipping)
         statuses = [
             self._status(f"{NODE_NAME}: driver", level_driver,
                          c.fault or f"{self.config.controller.driver} {state.value}", driver_values),
@@ -460,8 +470,7 @@ class BaseControllerNode(Node):
                          f"{loop['rate_hz']:.1f} Hz, p99 period {loop['period_p99_ms']:.2f} ms",
                          {k: f"{v:.3f}" if isinstance(v, float) else str(v) for k, v in loop.items()}),
             self._command_status(cmd_values),
-            self._status(f"{NODE_NAME}: odometry", DiagnosticStatus.OK,
-                         f"{odo.estimator}, {odo.distance:.2f} m", odo_values),
+            self._status(f"{NODE_NAME}: odometry", odo_level, odo_message, odo_values),
         ]
         for status in statuses:
             status.hardware_id = robot

@@ -40,6 +40,7 @@ from holonomic_core.model import (RobotModel, build_model, check_no_unknown, rea
 from holonomic_core.monitor import MonitorLimits, ReadingMonitor
 from holonomic_core.odometry import Odometry, OdometryNoise, wrap_angle
 from holonomic_core.schema import ConfigError, ParamSpec, validate
+from holonomic_core.slip_monitor import SlipLimits, SlipMonitor
 from holonomic_core.torque import OperationalSpaceController, dynamics_for
 
 _AXES = (("linear.x", "m/s", "m/s^2"), ("linear.y", "m/s", "m/s^2"),
@@ -91,8 +92,9 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "Torque mode: velocity gains for (x, y, yaw) [1/s] (2 sqrt(kp): critically "
               "damped).", default=(12.0, 12.0, 12.0), minimum=0.0, maximum=1e3, min_length=3),
     ParamSpec("estimator", "string",
-              "Odometry estimator: slip_min (C# = Cp+ Cq^-1), pinv or robust.",
-              default="slip_min", choices=ESTIMATORS),
+              "Odometry estimator: robust (slip_min, except that one caster alone disagreeing "
+              "by more than 0.1 m/s is left out), slip_min (C# = Cp+ Cq^-1) or pinv.",
+              default="robust", choices=ESTIMATORS),
     ParamSpec("odom_frame", "string", "Frame of the odometry (REP 105).", default="odom"),
     ParamSpec("base_frame", "string", "Frame of the base (REP 105).", default="base_link"),
     ParamSpec("frame_prefix", "string",
@@ -109,18 +111,47 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("enable_on_start", "bool",
               "Arm the motors at start. Default false: motors start disarmed and "
               "~/enable arms them.", default=False),
+    # defaults: the XR4000's calibration, holonomic-odometry-experiment --calibrate
+    # (docs/odometry_experiment.md)
+    ParamSpec("odometry.twist_window", "double",
+              "Span of the encoder readings whose least-squares line gives the published "
+              "twist [s]; it lags a ramp by half of it; 0: the last two readings.",
+              default=0.03, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.linear_variance_per_meter", "double",
               "Position variance added per metre travelled [m^2/m].",
-              default=4e-4, minimum=0.0, maximum=1.0),
+              default=5.31e-12, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.angular_variance_per_radian", "double",
               "Heading variance added per radian turned [rad^2/rad].",
-              default=1e-3, minimum=0.0, maximum=1.0),
+              default=8.1e-4, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.angular_variance_per_meter", "double",
               "Heading variance added per metre travelled [rad^2/m].",
-              default=4e-4, minimum=0.0, maximum=1.0),
+              default=1.35e-11, minimum=0.0, maximum=1.0),
+    ParamSpec("odometry.slip_position_gain", "double",
+              "Position variance added per squared RMS contact residual the estimator could "
+              "not explain, per second [s] (m^2 per (m/s)^2 s).",
+              default=0.0, minimum=0.0, maximum=1e4),
+    ParamSpec("odometry.slip_heading_gain", "double",
+              "Heading variance added per squared RMS contact residual, per second [s/m^2] "
+              "(rad^2 per (m/s)^2 s).", default=0.0, minimum=0.0, maximum=1e6),
     ParamSpec("odometry.twist_variance", "double_array",
-              "Variances of the reported twist (vx, vy, wz) [(m/s)^2, (m/s)^2, (rad/s)^2].",
-              default=(4e-4, 4e-4, 1e-3), minimum=0.0, maximum=100.0, min_length=3),
+              "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
+              "[(m/s)^2, (m/s)^2, (rad/s)^2].",
+              default=(6.84e-6, 3.45e-6, 1e-9), minimum=0.0, maximum=100.0, min_length=3),
+    ParamSpec("odometry.twist_slip_gain", "double_array",
+              "Twist variance (vx, vy, wz) added per (m/s)^2 of squared RMS contact residual "
+              "[-, -, 1/m^2].", default=(0.627, 0.545, 19.5), minimum=0.0, maximum=1e4,
+              min_length=3),
+    ParamSpec("odometry.twist_lag_gain", "double_array",
+              "Twist variance (vx, vy, wz) added per squared lag error of the axis, "
+              "(acceleration x half the twist window)^2 [-].", default=(0.484, 0.509, 1.08),
+              minimum=0.0, maximum=1e4, min_length=3),
+    ParamSpec("diagnostics.slip_threshold", "double",
+              "Odometry residual of one caster above which it counts as slipping [m/s].",
+              default=0.05, minimum=0.0, exclusive_minimum=True, maximum=10.0),
+    ParamSpec("diagnostics.slip_duration", "double",
+              "How long a caster must stay above diagnostics.slip_threshold before the "
+              "odometry diagnostics WARN, naming it [s].",
+              default=1.0, minimum=0.0, maximum=600.0),
     ParamSpec("safety.velocity_factor", "double",
               "A measured joint speed above this multiple of the joint's speed limit is an "
               "encoder glitch: the controller faults and stops the base [-].",
@@ -162,16 +193,19 @@ class ControllerConfig:
     max_acceleration: tuple[float, float, float]
     max_deceleration: tuple[float, float, float]
     noise: OdometryNoise
+    twist_window: float
     monitor: MonitorLimits
+    slip: SlipLimits
 
     @classmethod
     def from_values(cls, v: Mapping[str, Any]) -> "ControllerConfig":
         if v["publish_rate"] > v["control_rate"]:
             raise ConfigError("publish_rate", v["publish_rate"],
                               f"<= control_rate ({v['control_rate']:g} Hz)")
-        if len(v["odometry.twist_variance"]) != 3:
-            raise ConfigError("odometry.twist_variance", v["odometry.twist_variance"],
-                              "exactly 3 variances (vx, vy, wz)")
+        for key in ("odometry.twist_variance", "odometry.twist_slip_gain",
+                    "odometry.twist_lag_gain"):
+            if len(v[key]) != 3:
+                raise ConfigError(key, v[key], "exactly 3 values (vx, vy, wz)")
         for key in ("torque.kp", "torque.kv"):
             if len(v[key]) != 3:
                 raise ConfigError(key, v[key], "exactly 3 gains (x, y, yaw)")
@@ -190,7 +224,13 @@ class ControllerConfig:
             noise=OdometryNoise(v["odometry.linear_variance_per_meter"],
                                 v["odometry.angular_variance_per_radian"],
                                 v["odometry.angular_variance_per_meter"],
-                                tuple(v["odometry.twist_variance"])),
+                                v["odometry.slip_position_gain"],
+                                v["odometry.slip_heading_gain"],
+                                tuple(v["odometry.twist_variance"]),
+                                tuple(v["odometry.twist_slip_gain"]),
+                                tuple(v["odometry.twist_lag_gain"])),
+            twist_window=v["odometry.twist_window"],
+            slip=SlipLimits(v["diagnostics.slip_threshold"], v["diagnostics.slip_duration"]),
             monitor=MonitorLimits(v["safety.velocity_factor"], v["safety.reading_timeout"],
                                   v["safety.tracking_error"], v["safety.tracking_timeout"]),
         )
@@ -277,7 +317,9 @@ class BaseController:
         self.dt = 1.0 / c.control_rate
         self.cmd_timeout = c.cmd_timeout
         self.limiter = TwistLimiter(c.max_velocity, c.max_acceleration, c.max_deceleration)
-        self.odometry = Odometry(self.model, c.estimator, c.noise)
+        self.odometry = Odometry(self.model, c.estimator, c.noise, c.twist_window)
+        self.slip_monitor = SlipMonitor(getattr(self.model.kinematics, "caster_names", ()),
+                                        c.slip)
         self.monitor = ReadingMonitor(self.model.joint_names, self.model.max_joint_velocity,
                                       self.dt, c.monitor)
         self._clock = clock
@@ -393,7 +435,8 @@ class BaseController:
                 self._on_fault(DriverFault(problem))
             return False
         self.reading = reading
-        self.odometry.update(reading.positions, reading.stamp)
+        if self.odometry.update(reading.positions, reading.stamp):
+            self.slip_monitor.update(self.odometry.residual, reading.stamp)
 
         if not self.driver.armed:
             self.twist_command[:] = 0.0
@@ -491,6 +534,7 @@ class BaseController:
                     result = self._arm() if arg else self._disarm()
                 else:
                     self.odometry.reset()
+                    self.slip_monitor.reset()
                     result = (True, "odometry reset to the origin")
             except DriverError as exc:
                 self._on_fault(exc)

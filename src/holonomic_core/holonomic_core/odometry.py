@@ -9,21 +9,31 @@ between reads) integrates the motion that really happened, and a clock that
 jumps backwards cannot produce a pose jump (time is only used to report the
 velocity).
 
-Covariance: each increment adds variance proportional to the distance and
-angle it covers (the classic odometry error model: errors accumulate with
-travel, not with time), propagated through the pose composition's Jacobian.
+Twist: a least-squares line through the last readings within a time window
+(``twist_window``, using their stamps), per joint; its slope is the joint
+rate, mapped through the forward kinematics at the window's mean
+configuration. Why a line fit: it is exact at constant speed (no bias), uses
+the true, jittered sample times (a Savitzky-Golay filter assumes a uniform
+grid), has a known delay (half the window on a ramp) and a finite memory (a
+glitch leaves after one window), and has nothing to tune but the window. A
+Kalman filter would need a process-noise model of the robot's accelerations.
+Over one cycle it is the plain difference of two readings.
+
+Covariance (see :class:`OdometryNoise`): each increment adds variance that
+grows with the distance and angle it covers and with the contact slip the
+estimator could not explain (squared residual x time),
+propagated through the pose composition's Jacobian. The coefficients come
+from ``holonomic-odometry-experiment --calibrate`` (ground truth in the
+simulator, or whatever reference a user has on their floor).
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-
-
-#: contact-velocity residual [m/s] that doubles the odometry variances
-SLIP_SCALE = 0.01
 
 
 def wrap_angle(angle: float) -> float:
@@ -53,33 +63,58 @@ def compose_arc(pose, dx: float, dy: float, dtheta: float) -> tuple[float, float
 
 @dataclass(frozen=True)
 class OdometryNoise:
-    """Odometry error model.
+    """Odometry error model (the defaults: ``--calibrate`` on the XR4000 in
+    the simulator; see docs/odometry_experiment.md).
 
-    ``linear_variance_per_meter`` [m^2/m]: position variance added per metre
-    travelled, along and across the motion; ``angular_variance_per_radian``
-    [rad^2/rad] and ``angular_variance_per_meter`` [rad^2/m]: heading variance
-    per radian turned and per metre travelled; ``twist_variance``: diagonal of
-    the reported twist covariance [(m/s)^2, (m/s)^2, (rad/s)^2].
+    Per increment that moves the base by ``dist`` [m] and turns it by
+    ``dtheta`` [rad] while the estimator leaves ``rho`` [m/s] of contact
+    velocity unexplained (RMS over the wheel units) for ``dt`` [s]:
+
+    * position variance, isotropic in x, y [m^2]:
+      ``linear_variance_per_meter * dist + slip_position_gain * rho^2 * dt``;
+    * heading variance [rad^2]: ``angular_variance_per_radian * |dtheta| +
+      angular_variance_per_meter * dist + slip_heading_gain * rho^2 * dt``.
+
+    The slip terms are those of a velocity error of std ~rho with a
+    correlation time: ``slip_position_gain`` [s] (twice the correlation
+    time, times the squared ratio of twist error to residual),
+    ``slip_heading_gain`` [s/m^2]. They make the covariance scale with the
+    slip level (sigma ~ rho), which a term linear in rho does not.
+
+    Twist covariance, diagonal (vx, vy, wz) [(m/s)^2, (m/s)^2, (rad/s)^2]:
+    ``twist_variance + twist_slip_gain * rho^2 + twist_lag_gain * (a lag)^2``
+    per axis, with ``a`` the estimated acceleration of that axis and ``lag``
+    the filter's delay (half the twist window): a line fit lags a ramp by
+    ``a * lag``. ``twist_slip_gain`` is [-] for vx, vy and [1/m^2] for wz;
+    ``twist_lag_gain`` is [-].
     """
 
-    linear_variance_per_meter: float = 4e-4
-    angular_variance_per_radian: float = 1e-3
-    angular_variance_per_meter: float = 4e-4
-    twist_variance: tuple[float, float, float] = (4e-4, 4e-4, 1e-3)
+    linear_variance_per_meter: float = 5.31e-12
+    angular_variance_per_radian: float = 8.1e-4
+    angular_variance_per_meter: float = 1.35e-11
+    slip_position_gain: float = 0.0
+    slip_heading_gain: float = 0.0
+    twist_variance: tuple[float, float, float] = (6.84e-6, 3.45e-6, 1e-9)
+    twist_slip_gain: tuple[float, float, float] = (0.627, 0.545, 19.5)
+    twist_lag_gain: tuple[float, float, float] = (0.484, 0.509, 1.08)
 
 
 class Odometry:
     """Integrates joint encoder readings into the pose of base_link in odom.
 
     ``model`` is a :class:`holonomic_core.model.RobotModel`; ``estimator`` is
-    one of holonomic_core.kinematics.ESTIMATORS.
+    one of holonomic_core.kinematics.ESTIMATORS; ``twist_window`` [s] is the
+    span of readings the twist's line fit uses (0: the last two readings).
     """
 
-    def __init__(self, model, estimator: str = "slip_min", noise: OdometryNoise | None = None):
+    def __init__(self, model, estimator: str = "slip_min", noise: OdometryNoise | None = None,
+                 twist_window: float = 0.0):
+        if not (math.isfinite(twist_window) and twist_window >= 0.0):
+            raise ValueError(f"twist_window must be a finite number >= 0 s, got {twist_window}")
         self.model = model
         self.estimator = estimator
         self.noise = noise or OdometryNoise()
-        self._base_twist_cov = np.diag(self.noise.twist_variance).astype(float)
+        self.twist_window = float(twist_window)
         self.reset()
 
     def reset(self, pose=(0.0, 0.0, 0.0)) -> None:
@@ -94,10 +129,14 @@ class Odometry:
         # per-cycle update is scalar; the matrix is built when read
         self._P = (0.0,) * 6
         self.residual = np.zeros(0)
-        self.slip_factor = 1.0
+        #: RMS over the wheel units of the contact residual [m/s], last cycle
+        self.slip = 0.0
         self.distance = 0.0
+        self._twist_var = tuple(float(v) for v in self.noise.twist_variance)
         self._last_positions: np.ndarray | None = None
         self._last_stamp: float | None = None
+        # (stamp, positions, twist) of the readings in the twist window
+        self._history: deque = deque()
 
     @property
     def pose_covariance(self) -> np.ndarray:
@@ -107,8 +146,9 @@ class Odometry:
 
     @property
     def twist_covariance(self) -> np.ndarray:
-        """Covariance (3 x 3) of the reported twist, scaled by the slip factor."""
-        return self._base_twist_cov * self.slip_factor
+        """Covariance (3 x 3, diagonal) of the reported twist in base_link
+        [(m/s)^2, (m/s)^2, (rad/s)^2] (model in :class:`OdometryNoise`)."""
+        return np.diag(self._twist_var)
 
     def rebase(self) -> None:
         """Keep the pose; take the next reading as the new encoder reference
@@ -116,6 +156,7 @@ class Odometry:
         unobserved)."""
         self._last_positions = None
         self._last_stamp = None
+        self._history.clear()
 
     def update(self, positions: np.ndarray, stamp: float) -> bool:
         """Integrate the displacement since the last reading.
@@ -130,23 +171,68 @@ class Odometry:
         if self._last_positions is None:
             self._last_positions = np.array(positions, dtype=float)
             self._last_stamp = stamp
+            self._history.clear()
+            self._history.append((stamp, self._last_positions, self.twist))
             return False
         dq = positions - self._last_positions
         mid = self._last_positions + 0.5 * dq
-        # One fit of the displacement gives both; the fit is linear in the
-        # joint motion, so the residual of dq over dt is the rate residual.
-        disp, residual = self.model.kinematics.estimate(mid, dq, self.estimator)
         dt = stamp - self._last_stamp
+        slip2_dt = 0.0
         if dt > 0.0:
-            self._update_slip(residual / dt)
-        self._integrate(disp)
-        if dt > 0.0:
-            self.twist = disp / dt
+            # Fit the mean rates, not the displacement: slip_min and pinv are
+            # linear in the joint motion, but the robust estimator's
+            # thresholds are speeds [m/s]. The displacement is rate x dt.
+            rate_twist, residual = self.model.kinematics.estimate(mid, dq / dt, self.estimator)
+            disp = rate_twist * dt
+            self.residual = residual
+            self.slip = (math.sqrt(float(np.dot(residual, residual)) / residual.size)
+                         if residual.size else 0.0)
+            slip2_dt = self.slip * self.slip * dt
+        else:
+            # a repeated or backward stamp: no rate, but the motion is real
+            disp = self.model.kinematics.forward(mid, dq, self.estimator)
+        self._integrate(disp, slip2_dt)
         self._last_positions = np.array(positions, dtype=float)
         self._last_stamp = stamp
+        if dt > 0.0:
+            self._update_twist(disp, dt)
+        elif dt < 0.0:
+            # the clock went back: the window's stamps mean nothing any more
+            self._history.clear()
+            self._history.append((stamp, self._last_positions, self.twist))
         return True
 
-    def _integrate(self, disp: np.ndarray) -> None:
+    def _update_twist(self, disp: np.ndarray, dt: float) -> None:
+        """Line fit through the readings of the last ``twist_window`` s."""
+        history = self._history
+        stamp, positions = self._last_stamp, self._last_positions
+        # the readings within the window before this one, at least the last
+        while len(history) > 1 and stamp - history[0][0] > self.twist_window + 1e-9:
+            history.popleft()
+        if len(history) == 1:
+            twist = disp / dt          # the line through two readings
+        else:
+            t = np.array([h[0] for h in history] + [stamp])
+            q = np.array([h[1] for h in history] + [positions])
+            tc = t - t.mean()
+            qm = q.mean(axis=0)
+            rates = tc @ (q - qm) / float(tc @ tc)
+            twist = self.model.kinematics.forward(qm, rates, self.estimator)
+        # acceleration over the window, for the lag term of the covariance
+        t0, _, twist0 = history[0]
+        accel = (twist - twist0) / (stamp - t0)
+        history.append((stamp, positions, twist))
+        self.twist = twist
+        n = self.noise
+        lag = 0.5 * self.twist_window
+        rho2 = self.slip * self.slip
+        self._twist_var = tuple(
+            float(base + gain * rho2 + lag_gain * (a * lag) ** 2)
+            for base, gain, lag_gain, a in zip(n.twist_variance, n.twist_slip_gain,
+                                               n.twist_lag_gain, accel.tolist()))
+
+    def _integrate(self, disp: np.ndarray, slip2_dt: float) -> None:
+        """Compose the displacement; grow the covariance (slip2_dt: rho^2 dt [m^2/s])."""
         dx, dy, dth = disp.tolist()
         x, y, heading = self.pose.tolist()
         wx, wy = compose_arc((x, y, heading), dx, dy, dth)
@@ -156,8 +242,9 @@ class Odometry:
         dist = math.hypot(dx, dy)
         self.distance += dist
         n = self.noise
-        var_lin = n.linear_variance_per_meter * dist
-        var_ang = n.angular_variance_per_radian * abs(dth) + n.angular_variance_per_meter * dist
+        var_lin = n.linear_variance_per_meter * dist + n.slip_position_gain * slip2_dt
+        var_ang = (n.angular_variance_per_radian * abs(dth) + n.angular_variance_per_meter * dist
+                   + n.slip_heading_gain * slip2_dt)
         if var_lin == 0.0 and var_ang == 0.0:
             return
         # P' = F P F^T + G Q G^T with F = [[1, 0, -wy], [0, 1, wx], [0, 0, 1]]
@@ -165,25 +252,11 @@ class Odometry:
         # to odom; Q = diag(var_lin, var_lin, var_ang) is isotropic in x, y,
         # so G Q G^T = Q. Written out: 3x3 numpy products cost more than the
         # rest of the control cycle.
-        k = self.slip_factor
         a, b = -wy, wx
         p00, p01, p02, p11, p12, p22 = self._P
-        self._P = (p00 + 2.0 * a * p02 + a * a * p22 + k * var_lin,
+        self._P = (p00 + 2.0 * a * p02 + a * a * p22 + var_lin,
                    p01 + a * p12 + b * p02 + a * b * p22,
                    p02 + a * p22,
-                   p11 + 2.0 * b * p12 + b * b * p22 + k * var_lin,
+                   p11 + 2.0 * b * p12 + b * b * p22 + var_lin,
                    p12 + b * p22,
-                   p22 + k * var_ang)
-
-    def _update_slip(self, residual: np.ndarray) -> None:
-        """Scale the covariances by the slip the estimator could not explain.
-
-        With residual norm rho [m/s] per wheel unit, the twist variance and the
-        pose variance added by this increment are multiplied by
-        ``slip_factor = 1 + (max rho / SLIP_SCALE)^2``: 1 cm/s of unexplained
-        contact velocity doubles them. A square (DDROT) model has no residual.
-        """
-        self.residual = residual
-        self.slip_factor = 1.0
-        if residual.size:
-            self.slip_factor = 1.0 + (max(residual.tolist()) / SLIP_SCALE) ** 2
+                   p22 + var_ang)

@@ -72,6 +72,27 @@ class Trial:
     seconds: float = 0.0                 # [s] wall time of the simulation
 
 
+@dataclass
+class Recording:
+    """One run: every joint reading and the true state at the same instants.
+
+    ``stamps`` (N,) [s]; ``positions`` (N, joints) [rad]; ``truth`` (N, 3)
+    true pose (x, y, yaw) in odom [m, m, rad]; ``truth_twist`` (N, 3) true
+    body twist in base_link [m/s, m/s, rad/s]; ``config`` the robot config
+    the run was driven with.
+    """
+
+    robot: str
+    condition: str
+    seed: int
+    config: object
+    stamps: np.ndarray
+    positions: np.ndarray
+    truth: np.ndarray
+    truth_twist: np.ndarray
+    seconds: float = 0.0
+
+
 def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, float, float]:
     """Proportional move to ``target`` (odom frame), as a body twist."""
     ex, ey = target[0] - pose[0], target[1] - pose[1]
@@ -83,9 +104,9 @@ def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, flo
     return (c * vx_w + s * vy_w, -s * vx_w + c * vy_w, wz)
 
 
-def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
-              area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0) -> Trial:
-    """One random run and return; the final error of every estimator."""
+def record_run(robot: str, condition: str, seed: int, duration: float = 60.0,
+               area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0) -> Recording:
+    """One random run and return, recorded (see the module docstring)."""
     overrides = dict(CONDITIONS[condition])
     overrides.update({"sim.seed": seed, "cmd_timeout": 0.0, "enable_on_start": True})
     for axis in ("x", "y"):
@@ -97,8 +118,7 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
     driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
     rng = np.random.default_rng(seed)
     wz_max = min(1.5, cfg.controller.max_velocity[2])
-    readings = []
-    truths = []
+    stamps, readings, truths, twists = [], [], [], []
     t_wall = time.perf_counter()
     with driver:
         ctrl = BaseController(cfg, driver, clock=clock)
@@ -107,8 +127,11 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
         def step():
             ctrl.step()
             clock.now = ctrl.reading.stamp
-            readings.append((ctrl.reading.stamp, ctrl.reading.positions.copy()))
-            truths.append(driver.ground_truth().pose.copy())
+            stamps.append(ctrl.reading.stamp)
+            readings.append(ctrl.reading.positions.copy())
+            truth = driver.ground_truth()
+            truths.append(truth.pose.copy())
+            twists.append(truth.twist.copy())
 
         step()
         half = np.array(area) / 2.0
@@ -133,18 +156,30 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
         ctrl.set_command((0.0, 0.0, 0.0))
         for _ in range(int(0.5 * cfg.controller.control_rate)):
             step()
-    truth_end = truths[-1]
-    path = np.array(truths)
-    trial = Trial(robot, condition, seed,
+    return Recording(robot, condition, seed, cfg, np.array(stamps), np.array(readings),
+                     np.array(truths), np.array(twists), time.perf_counter() - t_wall)
+
+
+def final_errors(rec: Recording) -> Trial:
+    """The final error of every estimator integrating the same recording."""
+    path = rec.truth
+    cfg = rec.config
+    trial = Trial(rec.robot, rec.condition, rec.seed,
                   float(np.sum(np.linalg.norm(np.diff(path[:, :2], axis=0), axis=1))),
-                  seconds=time.perf_counter() - t_wall)
+                  seconds=rec.seconds)
     for estimator in ESTIMATORS:
-        odo = Odometry(cfg.model, estimator, cfg.controller.noise)
-        for stamp, positions in readings:
+        odo = Odometry(cfg.model, estimator, cfg.controller.noise, cfg.controller.twist_window)
+        for stamp, positions in zip(rec.stamps.tolist(), rec.positions):
             odo.update(positions, stamp)
-        trial.position_error[estimator] = float(np.linalg.norm(odo.pose[:2] - truth_end[:2]))
-        trial.heading_error[estimator] = abs(wrap_angle(odo.pose[2] - truth_end[2]))
+        trial.position_error[estimator] = float(np.linalg.norm(odo.pose[:2] - path[-1, :2]))
+        trial.heading_error[estimator] = abs(wrap_angle(odo.pose[2] - path[-1, 2]))
     return trial
+
+
+def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
+              area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0) -> Trial:
+    """One random run and return; the final error of every estimator."""
+    return final_errors(record_run(robot, condition, seed, duration, area, speed, acceleration))
 
 
 def summarize(trials: list[Trial]) -> str:
@@ -190,17 +225,27 @@ def main(argv: list[str] | None = None) -> int:
                              + "; ".join(f"{k} = {v}" for k, v in CONDITION_KEYS.items()))
     parser.add_argument("--json", type=output_file, metavar="FILE",
                         help="write every trial to FILE")
+    parser.add_argument("--calibrate", action="store_true",
+                        help="also fit the odometry covariance to ground truth over the runs, "
+                             "print the coverage per condition and the odometry.* parameters")
+    parser.add_argument("--check", action="store_true",
+                        help="print the coverage of the config's own covariance parameters")
+    parser.add_argument("--plot", type=output_file, metavar="PNG",
+                        help="with --calibrate/--check: error against sigma, written to PNG")
     args = parser.parse_args(argv)
-    trials = []
+    trials, recordings = [], []
     for condition in args.condition or list(CONDITIONS):
         for seed in range(args.seeds):
             try:
-                trial = run_trial(args.robot, condition, seed, args.duration,
-                                  speed=args.speed, acceleration=args.acceleration)
+                rec = record_run(args.robot, condition, seed, args.duration,
+                                 speed=args.speed, acceleration=args.acceleration)
             except ConfigError as exc:      # e.g. per-wheel radii on a DDROT
                 print(f"{condition}: skipped for {args.robot} ({exc})", file=sys.stderr)
                 break
+            trial = final_errors(rec)
             trials.append(trial)
+            if args.calibrate or args.check:
+                recordings.append(rec)
             errs = "  ".join(f"{e} {trial.position_error[e] * 1000:6.1f}mm" for e in ESTIMATORS)
             print(f"{condition:26s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
                   f"({trial.seconds:.1f} s)", file=sys.stderr, flush=True)
@@ -208,6 +253,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         with open(args.json, "w") as handle:
             json.dump([t.__dict__ for t in trials], handle, indent=1)
+    if recordings:
+        from holonomic_sim.odometry_calibration import calibrate_main
+        calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot)
     return 0
 
 

@@ -39,11 +39,39 @@ Estimators of the twist from measured joint rates (``forward``):
   slip, in m/s, the same for every wheel and both directions;
 * ``pinv``: the Moore-Penrose inverse of ``C``, for comparison: it fits joint
   rates, which weighs lateral slip by 1/b^2 and rolling slip by 1/r^2;
-* ``robust``: iteratively reweighted least squares on the same contact-velocity
-  residuals (so it keeps C#'s weighting), with Cauchy weights per caster and
-  the best leave-one-caster-out fit as the starting point: a single wheel that
-  spins or skids is down-weighted instead of dragging the estimate (the idea of
-  the PR2 base odometry's IRLS, written for this model).
+* ``robust``: ``slip_min``, except when the slip is one contact that
+  disagrees with all the others (a wheel that spins or skids alone): then that
+  caster is left out. See :meth:`PoweredCasterKinematics._robust`.
+
+What the residual can tell apart. The sensed contact velocities are ``u =
+C_p x + s`` (slip ``s``, 2n entries); the fit sees only the residual ``(I -
+H) s`` with ``H = C_p C_p^+``, in the (2n - 3)-dimensional space orthogonal to
+the rigid-body motions. That space is also the space of *internal* forces
+(``C_p^T f = 0``: no net force, no net torque on the base), so actuator-conflict
+slip -- each contact yielding in proportion to the internal force the casters
+push on each other with -- lies in it entirely, and C# ignores it exactly
+(``C_p^+ s = 0``); it is why the paper chose C#. A single contact's burst
+``s = E_i d`` (2 rows of caster i) leaves a residual in the 2-dimensional
+subspace ``(I - H) E_i``, and leaving caster i out explains it completely.
+
+* 4 or more casters (2n - 3 >= 5): the subspaces of two casters meet only at
+  zero, so one outlier is located uniquely; disagreement spread over all
+  contacts is not confined to any of them.
+* 3 casters (3-dimensional residual, planes of 2): one outlier is located,
+  except along the lines where two casters' planes meet (then either caster
+  could be the culprit; the estimator keeps slip_min). Two simultaneous
+  outliers cannot be told apart from conflict.
+* 2 casters (4 equations, 3 unknowns, one redundant): the residual is one
+  number; both casters explain it equally, and so does conflict. An outlier
+  is detected but cannot be located: ``robust`` is ``slip_min``.
+
+What no residual can tell apart: conflict slip produced by *one* lagging
+caster, ``s = (I - H) E_i d``, gives the same sensed velocities as a burst
+``E_i d`` of that caster on a different rigid motion (``u = C_p (x - C_p^+ E_i
+d) + E_i d``). Grip decides between them: a tyre that grips yields by
+millimetres per second (micro-slip, a few % of its speed), a wheel that spins
+or skids departs by tenths of a metre per second. So a caster is rejected
+only when its disagreement with the others exceeds ``ROBUST_OUTLIER_SLIP``.
 
 The least-squares fit of a planar rigid velocity field has a closed form (its
 normal equations decouple about the weighted centroid of the contact points),
@@ -62,17 +90,24 @@ import numpy as np
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics
 from holonomic_core.schema import ConfigError, ParamSpec
 
-#: scale [m/s] of the robust estimator's Cauchy weights: a caster whose
-#: contact velocity disagrees with the fit by this much counts half.
-ROBUST_SCALE = 0.02
 #: why the caster offset must be > 0, for the error messages
 _ZERO_OFFSET = ("b = 0 makes a caster a steered wheel that cannot move sideways without "
                 "first turning: the base would not be holonomic")
 
-#: residual [m/s] beyond which the robust estimator ignores a caster
-ROBUST_REJECT = 0.1
-#: IRLS iterations of the robust estimator (it converges in 3-5)
-ROBUST_ITERATIONS = 8
+#: disagreement [m/s] of one caster with the rigid motion of the others above
+#: which the robust estimator calls it a burst (a gripping tyre's micro-slip
+#: stays at a few cm/s even at 1 m/s; a wheel that spins or skids is far off)
+ROBUST_OUTLIER_SLIP = 0.1
+#: at most this fraction of the residual energy (sum of squared contact
+#: residuals) may remain when the suspected caster is left out: the others
+#: must agree on one rigid motion (for spread conflict on 4 casters the
+#: fraction is Beta(3/2, 1)-distributed, below 0.05 in 1 % of cycles per caster)
+ROBUST_CONCENTRATION = 0.05
+#: ... and it must explain more than any other caster would, by this much
+#: [m/s] (as a root of residual energy): with 3 casters the residuals that
+#: two casters can explain meet along a line, and near it either could be the
+#: culprit (a relative margin fails there: the runner-up often explains 99 %)
+ROBUST_UNIQUENESS = 0.03
 
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -104,24 +139,6 @@ class Caster:
     @property
     def wheel_joint(self) -> str:
         return f"{self.name}_wheel_joint"
-
-
-def _rigid_fit(px, py, vx, vy, w):
-    """Weighted least-squares rigid velocity field through contact velocities.
-
-    Points ``(px, py)`` [m], velocities ``(vx, vy)`` [m/s], weights ``w`` >= 0
-    (arrays of n). Minimises sum w_i |v_i - (v0 + wz k x p_i)|^2 over the
-    twist (v0x, v0y, wz) of base_link's origin. About the weighted centroid
-    ``c`` the normal equations decouple: the translation there is the weighted
-    mean velocity and ``wz = sum w (q x v) / sum w |q|^2`` with ``q = p - c``.
-    """
-    sw = w.sum()
-    cx, cy = (w * px).sum() / sw, (w * py).sum() / sw
-    mx, my = (w * vx).sum() / sw, (w * vy).sum() / sw
-    qx, qy = px - cx, py - cy
-    den = (w * (qx * qx + qy * qy)).sum()
-    wz = (w * (qx * vy - qy * vx)).sum() / den if den > 1e-12 * sw else 0.0
-    return np.array([mx + wz * cy, my - wz * cx, wz])
 
 
 class PoweredCasterKinematics(BaseKinematics):
@@ -167,7 +184,6 @@ class PoweredCasterKinematics(BaseKinematics):
         self.sy = np.array([c.axis[1] for c in casters])
         self.r = np.array([c.wheel_radius for c in casters])
         self.b = np.array([c.caster_offset for c in casters])
-        self._ones = np.ones(len(casters))
         # The control cycle's paths (inverse, the slip_min fit) run on Python
         # floats: for n <= 8 casters a loop of scalar math costs a third of
         # the same work as a dozen numpy calls on length-n arrays.
@@ -266,16 +282,6 @@ class PoweredCasterKinematics(BaseKinematics):
             out.append((c * vsx + s * vsy) / r)
         return np.array(out)
 
-    def _contact_velocities(self, positions, velocities):
-        """Contact points and the sensed contact velocities C_q^-1 q_dot (per caster)."""
-        phi = positions[0::2]
-        c, s = np.cos(phi), np.sin(phi)
-        dphi, drho = velocities[0::2], velocities[1::2]
-        px, py = self.sx - self.b * c, self.sy - self.b * s
-        vx = -self.b * s * dphi + self.r * c * drho
-        vy = self.b * c * dphi + self.r * s * drho
-        return px, py, vx, vy
-
     def forward(self, positions: np.ndarray, velocities: np.ndarray,
                 estimator: str = "slip_min") -> np.ndarray:
         """Body twist (vx, vy, wz) from joint rates with the chosen estimator."""
@@ -295,9 +301,17 @@ class PoweredCasterKinematics(BaseKinematics):
         return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
                               estimator)
 
-    def _slip_min(self, positions, velocities):
-        """The slip_min fit and its residual in scalar math: ``_rigid_fit``
-        with unit weights, written out per caster (same closed form)."""
+    def _fit(self, positions, velocities):
+        """The slip_min fit in scalar math, with what the robust test needs.
+
+        Returns the twist (vx, vy, wz) of base_link, the per-caster contact
+        residuals ``[(x, y, rx, ry)]`` (contact point [m] and the sensed
+        contact velocity minus the fitted one [m/s]), the contact centroid
+        ``(cx, cy)`` [m] and ``D = sum |p_i - c|^2`` [m^2]. About the
+        centroid the normal equations of the rigid fit decouple: the
+        translation there is the mean contact velocity and ``wz = sum q x u /
+        D`` with ``q = p - c`` -- O(n), no matrix inversion.
+        """
         q, v = positions.tolist(), velocities.tolist()
         cos, sin = math.cos, math.sin
         pts = []
@@ -323,68 +337,82 @@ class PoweredCasterKinematics(BaseKinematics):
             den += qx * qx + qy * qy
         wz = num / den if den > 1e-12 * n else 0.0
         tx, ty = mu + wz * cy, mw - wz * cx
-        residual = [math.hypot(u - (tx - wz * y), w - (ty + wz * x)) for x, y, u, w in pts]
-        return np.array((tx, ty, wz)), np.array(residual)
+        res = [(x, y, u - (tx - wz * y), w - (ty + wz * x)) for x, y, u, w in pts]
+        return (tx, ty, wz), res, (cx, cy), den
+
+    def _slip_min(self, positions, velocities):
+        twist, res, _, _ = self._fit(positions, velocities)
+        return np.array(twist), np.array([math.hypot(rx, ry) for _, _, rx, ry in res])
 
     def _estimate(self, positions, velocities, estimator):
         if estimator == "slip_min":
             return self._slip_min(positions, velocities)
-        px, py, vx, vy = self._contact_velocities(positions, velocities)
+        if estimator == "robust":
+            return self._robust(positions, velocities)
         if estimator == "pinv":
             C = self.constraint_matrix(positions)
             twist = np.linalg.lstsq(C, velocities, rcond=None)[0]
-        elif estimator == "robust":
-            twist = self._robust(px, py, vx, vy)
-        else:
-            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
-        return twist, self._residual(px, py, vx, vy, twist)
+            fitted, res, _, _ = self._fit(positions, velocities)
+            # residual of pinv's twist: the slip_min residual minus the rigid
+            # field of the two twists' difference
+            dvx, dvy, dwz = (twist - np.array(fitted)).tolist()
+            return twist, np.array([math.hypot(rx - (dvx - dwz * y), ry - (dvy + dwz * x))
+                                    for x, y, rx, ry in res])
+        raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
 
-    @staticmethod
-    def _residual(px, py, vx, vy, twist):
-        ex = vx - (twist[0] - twist[2] * py)
-        ey = vy - (twist[1] + twist[2] * px)
-        return np.hypot(ex, ey)
+    def _robust(self, positions, velocities):
+        """slip_min, or the fit without the one caster that alone disagrees.
 
-    def _robust(self, px, py, vx, vy):
-        """IRLS with Cauchy weights on the per-caster contact residuals.
-
-        Start from the best of the full fit and the leave-one-out fits (with
-        3 or more casters; with 2, one caster's slip cannot be told from the
-        other's), judged by the Cauchy loss; then reweight. Residuals well
-        below ROBUST_SCALE keep weight ~1, so without slip this is C#.
+        Leave-one-caster-out in closed form (regression deletion formulas on
+        the 2 rows of caster i): with the hat block ``H_ii = I/n + t t^T / D``
+        (``t = k x q_i``), the caster's disagreement with the rigid motion of
+        the others is ``d_i = (I - H_ii)^-1 r_i`` (r_i its residual in the full
+        fit), leaving it out lowers the residual energy by ``r_i . d_i``, and
+        moves the fit by ``-d_i / n`` (translation at the centroid) and
+        ``-(t . d_i) / D`` (rotation). Caster i* with the largest drop is
+        rejected when (a) the others then agree on a rigid motion (at most
+        ROBUST_CONCENTRATION of the energy left), (b) it explains more than any
+        other caster by ROBUST_UNIQUENESS^2 and (c) ``|d_i*|`` exceeds
+        ROBUST_OUTLIER_SLIP (a burst, not a gripping tyre's conflict slip).
+        Otherwise this is slip_min exactly. ``I - H_ii`` is singular with 2
+        casters (the other caster alone cannot fix a twist): no rejection.
         """
-        n = len(px)
-        candidates = [_rigid_fit(px, py, vx, vy, self._ones)]
-        if n >= 3:
-            for i in range(n):
-                w = self._ones.copy()
-                w[i] = 0.0
-                candidates.append(_rigid_fit(px, py, vx, vy, w))
-
-        def loss(t):
-            res = self._residual(px, py, vx, vy, t) / ROBUST_SCALE
-            return float(np.log1p(res * res).sum())
-
-        twist = min(candidates, key=loss)
-        for _ in range(ROBUST_ITERATIONS):
-            res = self._residual(px, py, vx, vy, twist) / ROBUST_SCALE
-            w = 1.0 / (1.0 + res * res)
-            new = _rigid_fit(px, py, vx, vy, w)
-            converged = np.max(np.abs(new - twist)) < 1e-9
-            twist = new
-            if converged:
-                break
-        # Cauchy weights never reach zero: a wheel spinning at 1 m/s would
-        # still pull the fit by ~1 mm/s. Casters beyond ROBUST_REJECT are
-        # dropped outright, as long as two casters (four equations for three
-        # unknowns) remain.
-        res = self._residual(px, py, vx, vy, twist) / ROBUST_SCALE
-        outliers = res > ROBUST_REJECT / ROBUST_SCALE
-        if n >= 3 and outliers.any() and n - outliers.sum() >= 2:
-            w = 1.0 / (1.0 + res * res)
-            w[outliers] = 0.0
-            twist = _rigid_fit(px, py, vx, vy, w)
-        return twist
+        (tx, ty, wz), res, (cx, cy), D = self._fit(positions, velocities)
+        n = len(res)
+        rss = sum(rx * rx + ry * ry for _, _, rx, ry in res)
+        a = 1.0 - 1.0 / n
+        drops = []
+        for x, y, rx, ry in res:
+            tqx, tqy = -(y - cy), x - cx
+            t2 = tqx * tqx + tqy * tqy
+            den = D * a - t2
+            if n < 3 or den <= 1e-9 * D:
+                drops.append(None)
+                continue
+            # (a I - t t^T / D)^-1 r = r / a + t (t . r) / (a den)   (Sherman-Morrison)
+            k = (tqx * rx + tqy * ry) / (a * den)
+            dx, dy = rx / a + k * tqx, ry / a + k * tqy
+            drops.append((rx * dx + ry * dy, dx, dy, tqx, tqy))
+        ranked = sorted((d[0], i) for i, d in enumerate(drops) if d is not None)
+        best = None
+        if len(ranked) >= 2 and rss > 0.0:
+            drop, i = ranked[-1]
+            second = ranked[-2][0]
+            _, dx, dy, tqx, tqy = drops[i]
+            if (rss - drop <= ROBUST_CONCENTRATION * rss
+                    and drop - second >= ROBUST_UNIQUENESS ** 2
+                    and math.hypot(dx, dy) > ROBUST_OUTLIER_SLIP):
+                best = (i, dx, dy, tqx, tqy)
+        if best is None:
+            return (np.array((tx, ty, wz)),
+                    np.array([math.hypot(rx, ry) for _, _, rx, ry in res]))
+        i, dx, dy, tqx, tqy = best
+        # centroid translation and rotation move by -d/n and -(t . d)/D
+        dwz = -(tqx * dx + tqy * dy) / D
+        dtx, dty = -dx / n + dwz * cy, -dy / n - dwz * cx    # at base_link's origin
+        residual = [math.hypot(rx - (dtx - dwz * y), ry - (dty + dwz * x))
+                    for x, y, rx, ry in res]
+        return np.array((tx + dtx, ty + dty, wz + dwz)), np.array(residual)
 
     def jacobian(self, positions: np.ndarray) -> np.ndarray:
         """``C# = C_p^+ C_q^-1`` (3 x 2n): the slip-minimising estimator (eq. 13)."""

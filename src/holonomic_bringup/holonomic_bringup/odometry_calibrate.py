@@ -1,0 +1,108 @@
+"""``holonomic-odometry-calibrate``: calibrate the odometry covariance on your floor.
+
+Reads MCAP recordings made with ``holonomic-bringup ROBOT --record FILE``
+(the robot's config, ``joint_states``) plus a reference of the true pose as
+``nav_msgs/Odometry`` (``ground_truth/odom`` in the simulator; on a real
+robot a motion-capture or total-station topic recorded alongside, e.g.
+``--reference-topic /mocap/odom``), replays the odometry over the joint
+readings, and fits the ``odometry.*`` covariance parameters exactly as
+``holonomic-odometry-experiment --calibrate`` does (same code:
+``holonomic_sim.odometry_calibration``). Prints the coverage before and
+after and the block to paste into the config file. Drive the way the robot
+will be driven (speeds, turns, the floors it will see) for a few minutes,
+with ``publish_rate`` equal to ``control_rate``: the replay runs at the rate
+of the recorded ``joint_states``.
+
+The reference's own frame does not matter: poses are taken relative to the
+reference's first pose. Its twist must be in base_link (as nav_msgs/Odometry
+specifies); without one (all zeros) the twist coverage is meaningless.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from holonomic_bringup.recording_plot import _odom_arrays, load
+from holonomic_core.controller import config_from_flat
+from holonomic_core.odometry import wrap_angle
+from holonomic_core.schema import ConfigError
+
+
+def recording_from_mcap(path: Path, namespace: str = "", reference_topic: str = "ground_truth/odom"):
+    """A :class:`holonomic_sim.odometry_experiment.Recording` from one MCAP file."""
+    from holonomic_sim.odometry_experiment import Recording
+
+    if not path.is_file():
+        raise ConfigError("FILE", str(path), "an existing MCAP file")
+    try:
+        robots, series, _ = load(path)
+    except Exception as exc:  # a truncated or foreign file: say so, no traceback
+        raise ConfigError("FILE", str(path), f"an MCAP recording ({exc})") from exc
+    # the recorder keys robots by their namespace as ROS writes it ("/rec", "")
+    wanted = {namespace, "/" + namespace.strip("/")} if namespace.strip("/") else {"", "/"}
+    found = [ns for ns in robots if ns in wanted]
+    if not found and not namespace and len(robots) == 1:
+        found = list(robots)
+    if not found:
+        raise ConfigError("--namespace", namespace, f"one of the recorded robots {sorted(robots)}")
+    cfg = config_from_flat(robots[found[0]], str(path))
+    prefix = "/" + found[0].strip("/") if found[0].strip("/") else ""
+    joints = series.get(f"{prefix}/joint_states") or series.get("joint_states") or []
+    reference = (series.get(reference_topic) or series.get(f"/{reference_topic}")
+                 or series.get(f"{prefix}/{reference_topic}") or [])
+    if len(joints) < 10 or len(reference) < 10:
+        raise ConfigError("FILE", str(path), f"a recording with joint_states and {reference_topic} "
+                          f"(found {len(joints)} and {len(reference)} messages)")
+    names = cfg.model.joint_names
+    order = [list(joints[0][1].name).index(j) for j in names]
+    stamps = np.array([t for t, _ in joints])
+    positions = np.array([np.asarray(m.position)[order] for _, m in joints])
+    t_ref, pose, twist = _odom_arrays(reference)
+    # the reference's first pose is the odometry's origin
+    x0, y0, th0 = pose[0]
+    c, s = math.cos(th0), math.sin(th0)
+    rel = np.column_stack((c * (pose[:, 0] - x0) + s * (pose[:, 1] - y0),
+                           -s * (pose[:, 0] - x0) + c * (pose[:, 1] - y0),
+                           np.unwrap(pose[:, 2] - th0)))
+    keep = (stamps >= t_ref[0]) & (stamps <= t_ref[-1])
+    stamps, positions = stamps[keep], positions[keep]
+    truth = np.column_stack([np.interp(stamps, t_ref, rel[:, k]) for k in range(3)])
+    truth[:, 2] = [wrap_angle(v) for v in truth[:, 2]]
+    truth_twist = np.column_stack([np.interp(stamps, t_ref, twist[:, k]) for k in range(3)])
+    # the odometry starts where the first kept reading is: re-origin the truth there
+    x0, y0, th0 = truth[0]
+    c, s = math.cos(th0), math.sin(th0)
+    dx, dy = truth[:, 0] - x0, truth[:, 1] - y0
+    truth = np.column_stack((c * dx + s * dy, -s * dx + c * dy,
+                             [wrap_angle(v - th0) for v in truth[:, 2]]))
+    return Recording(cfg.model.name, path.name, 0, cfg, stamps, positions, truth, truth_twist)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="holonomic-odometry-calibrate",
+                                     description=__doc__.split("\n")[0])
+    parser.add_argument("files", nargs="+", type=Path, help="MCAP recordings")
+    parser.add_argument("--namespace", default="", help="robot namespace in the recording")
+    parser.add_argument("--reference-topic", default="ground_truth/odom",
+                        help="nav_msgs/Odometry topic of the true pose (default ground_truth/odom)")
+    parser.add_argument("--plot", metavar="PNG", help="error against sigma, written to PNG")
+    args = parser.parse_args(argv)
+    from holonomic_sim.odometry_calibration import calibrate_main
+
+    try:
+        recordings = [recording_from_mcap(f, args.namespace, args.reference_topic)
+                      for f in args.files]
+    except (ConfigError, OSError, ValueError) as exc:
+        print(f"holonomic-odometry-calibrate: {exc}", file=sys.stderr)
+        return 2
+    calibrate_main(recordings, fit_noise=True, plot_path=args.plot)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

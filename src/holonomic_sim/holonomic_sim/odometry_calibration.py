@@ -1,0 +1,360 @@
+"""Calibration of the odometry covariance against ground truth.
+
+``holonomic-odometry-experiment --calibrate`` records the experiment's runs
+(joint readings and the true pose and twist at the same instants), replays
+each recording through :class:`holonomic_core.odometry.Odometry`, and fits
+the coefficients of :class:`OdometryNoise` so that the published covariance
+matches the errors it claims:
+
+* the covariance is linear in the coefficients (every increment adds ``Q``
+  linear in them and the propagation ``F P F^T`` does not depend on them), so
+  one replay per coefficient, with that coefficient 1 and the others 0, gives
+  its basis ``B_k(t)``, and ``P(t) = sum_k c_k B_k(t)`` for any coefficients;
+* the heading coefficients are fitted first (the heading variance depends on
+  them alone), then the position ones, each by maximum likelihood of a
+  Gaussian error (coefficients >= 0, a multiplicative fixed-point
+  iteration), then scaled together so that on every floor (slip
+  condition) at least 95 % of the sampled errors fall inside the 95 % region -- the errors are partly systematic (a
+  bias that grows with distance), not the random walk the model assumes, so
+  the likelihood alone does not give the coverage;
+* the twist coefficients likewise, per axis, from the published twist's error.
+
+Samples: every 0.1 s of each run after its first second. The coverage is
+reported per slip condition and pooled: the fraction of samples whose true
+position lies in the published 95 % ellipse (Mahalanobis distance^2 <=
+5.991, chi^2 with 2 degrees of freedom), whose true heading lies within
+1.96 sigma, and whose true twist component lies within 1.96 sigma.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from holonomic_core.odometry import Odometry, OdometryNoise, wrap_angle
+
+#: pose coefficients (OdometryNoise fields), heading-only ones first
+HEADING_KEYS = ("angular_variance_per_radian", "angular_variance_per_meter",
+                "slip_heading_gain")
+POSITION_KEYS = ("linear_variance_per_meter", "slip_position_gain")
+CHI2_2_95 = 5.991            # 95 % quantile of chi^2 with 2 degrees of freedom
+Z_95 = 1.96
+#: coverage the scale step gives the worst floor (the target band is 90-99.5 %)
+TARGET_COVERAGE = 0.95
+SAMPLE_PERIOD = 0.1          # [s]
+#: smallest calibrated twist variance [(m/s)^2, (rad/s)^2]
+TWIST_VARIANCE_FLOOR = 1e-9
+WARM_UP = 1.0                # [s] before the first sample
+
+
+def _zero_noise(**values) -> OdometryNoise:
+    base = OdometryNoise(0.0, 0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                        (0.0, 0.0, 0.0))
+    return replace(base, **values)
+
+
+def replay(rec, noise: OdometryNoise) -> dict:
+    """Odometry over a recording with ``noise``; the samples (dict of arrays)."""
+    cfg = rec.config.controller
+    odo = Odometry(rec.config.model, cfg.estimator, noise, cfg.twist_window)
+    t0 = rec.stamps[0]
+    next_sample = t0 + WARM_UP
+    out = {"index": [], "pose": [], "cov": [], "twist": [], "twist_var": []}
+    for k, (stamp, positions) in enumerate(zip(rec.stamps.tolist(), rec.positions)):
+        odo.update(positions, stamp)
+        if stamp >= next_sample - 1e-9:
+            next_sample += SAMPLE_PERIOD
+            out["index"].append(k)
+            out["pose"].append(odo.pose.copy())
+            out["cov"].append(odo.pose_covariance)
+            out["twist"].append(odo.twist.copy())
+            out["twist_var"].append(np.diag(odo.twist_covariance).copy())
+    return {key: np.array(v) for key, v in out.items()}
+
+
+class Samples:
+    """Errors and covariance bases of one or more recordings, pooled."""
+
+    def __init__(self, recordings=()):
+        parts = [self._one(rec) for rec in recordings]
+        self._pool(parts)
+
+    @staticmethod
+    def _one(rec) -> dict:
+        bases = {}
+        for key in HEADING_KEYS + POSITION_KEYS:
+            bases[key] = replay(rec, _zero_noise(**{key: 1.0}))
+        slip = replay(rec, _zero_noise(twist_slip_gain=(1.0, 1.0, 1.0)))
+        lag = replay(rec, _zero_noise(twist_lag_gain=(1.0, 1.0, 1.0)))
+        first = bases[HEADING_KEYS[0]]
+        idx = first["index"]
+        err = first["pose"] - rec.truth[idx]
+        err[:, 2] = [wrap_angle(v) for v in err[:, 2]]
+        return {"condition": np.array([rec.condition] * len(idx)), "error": err,
+                "twist_error": first["twist"] - rec.truth_twist[idx],
+                "bases": {k: b["cov"] for k, b in bases.items()},
+                "slip_basis": slip["twist_var"], "lag_basis": lag["twist_var"]}
+
+    def _pool(self, parts: list) -> None:
+        self._parts = parts
+        self.condition = np.concatenate([p["condition"] for p in parts])
+        self.error = np.concatenate([p["error"] for p in parts])
+        self.twist_error = np.concatenate([p["twist_error"] for p in parts])
+        self.bases = {k: np.concatenate([p["bases"][k] for p in parts])
+                      for k in HEADING_KEYS + POSITION_KEYS}
+        self.slip_basis = np.concatenate([p["slip_basis"] for p in parts])
+        self.lag_basis = np.concatenate([p["lag_basis"] for p in parts])
+
+    def subset(self, conditions) -> "Samples":
+        """The samples of the runs in ``conditions`` only."""
+        out = Samples.__new__(Samples)
+        out._pool([p for p in self._parts if p["condition"][0] in conditions])
+        return out
+
+    def pose_covariance(self, noise: OdometryNoise) -> np.ndarray:
+        """(K, 3, 3) published pose covariance at the samples under ``noise``."""
+        return sum(getattr(noise, k) * self.bases[k] for k in HEADING_KEYS + POSITION_KEYS)
+
+    def twist_variance(self, noise: OdometryNoise) -> np.ndarray:
+        """(K, 3) published twist variances at the samples under ``noise``."""
+        return (np.asarray(noise.twist_variance) + np.asarray(noise.twist_slip_gain)
+                * self.slip_basis + noise.twist_lag_gain * self.lag_basis)
+
+    def coverage(self, noise: OdometryNoise, mask=None) -> dict:
+        """Fractions of samples inside the 95 % regions (position, heading, twist axes)."""
+        mask = np.ones(len(self.error), bool) if mask is None else mask
+        P = self.pose_covariance(noise)[mask]
+        e = self.error[mask]
+        d2 = mahalanobis2(e[:, :2], P[:, :2, :2])
+        hdg = np.abs(e[:, 2]) <= Z_95 * np.sqrt(P[:, 2, 2])
+        tv = self.twist_variance(noise)[mask]
+        tw = np.abs(self.twist_error[mask]) <= Z_95 * np.sqrt(tv)
+        return {"position": float(np.mean(d2 <= CHI2_2_95)), "heading": float(np.mean(hdg)),
+                "vx": float(np.mean(tw[:, 0])), "vy": float(np.mean(tw[:, 1])),
+                "wz": float(np.mean(tw[:, 2])), "samples": int(mask.sum())}
+
+
+def mahalanobis2(e: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """e^T P^-1 e for (K, 2) errors and (K, 2, 2) covariances (2x2 inverse by hand)."""
+    a, b, d = P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]
+    det = np.maximum(a * d - b * b, 1e-30)
+    x, y = e[:, 0], e[:, 1]
+    return (d * x * x - 2.0 * b * x * y + a * y * y) / det
+
+
+def _fit_variances(bases: np.ndarray, err2: np.ndarray, iterations: int = 300) -> np.ndarray:
+    """Maximum-likelihood c >= 0 of var_t = bases[t] @ c for zero-mean errors
+    with squared values ``err2`` (T,), bases (T, m) >= 0.
+
+    Multiplicative fixed point of the likelihood's stationarity condition
+    ``sum B_k / v = sum e^2 B_k / v^2`` (both sides positive, so c stays
+    >= 0; a coefficient whose basis never helps decays towards 0). Starts
+    with every basis explaining an equal share of the mean squared error.
+    """
+    m = bases.shape[1]
+    scale = np.maximum(bases.mean(axis=0), 1e-300)
+    c = np.full(m, err2.mean() / m) / scale
+    for _ in range(iterations):
+        v = np.maximum(bases @ c, 1e-300)
+        c = c * ((bases * (err2 / v ** 2)[:, None]).sum(axis=0)
+                 / np.maximum((bases / v[:, None]).sum(axis=0), 1e-300))
+    return c
+
+
+def _fit_covariances(fixed: np.ndarray, bases: list, e: np.ndarray,
+                     iterations: int = 300) -> np.ndarray:
+    """The same for 2 x 2 covariances ``fixed + sum_k c_k bases[k]`` and
+    errors e (T, 2): ``c_k *= sum e^T P^-1 B_k P^-1 e / sum tr(P^-1 B_k)``."""
+    m = len(bases)
+    scale = np.array([max(float(np.mean(b[:, 0, 0] + b[:, 1, 1])), 1e-300) for b in bases])
+    c = np.full(m, float(np.mean(np.sum(e * e, axis=1))) / m) / scale
+    for _ in range(iterations):
+        P = fixed + sum(ci * b for ci, b in zip(c, bases))
+        a, b_, d = P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]
+        det = np.maximum(a * d - b_ * b_, 1e-300)
+        inv = np.stack([np.stack([d, -b_], -1), np.stack([-b_, a], -1)], -2) / det[:, None, None]
+        w = np.einsum("tij,tj->ti", inv, e)          # P^-1 e
+        num = np.array([np.sum(np.einsum("ti,tij,tj->t", w, B, w)) for B in bases])
+        den = np.array([np.sum(np.einsum("tij,tji->t", inv, B)) for B in bases])
+        c = c * num / np.maximum(den, 1e-300)
+    return c
+
+
+def _scale_to_coverage(inside, groups) -> float:
+    """Smallest scale s (bisection in log space) at which every group's
+    fraction of samples inside the 95 % region reaches TARGET_COVERAGE.
+
+    ``inside(s)`` -> boolean array over the samples; ``groups``: the label of
+    each sample (a slip condition = a floor). The worst floor decides: an
+    odometry that claims 95 % must not be over-confident on any floor it was
+    calibrated on, at the price of being a little pessimistic on the others.
+    """
+    labels = list(dict.fromkeys(groups.tolist()))
+    masks = [groups == g for g in labels]
+
+    def worst(scale):
+        hit = inside(scale)
+        return min(float(np.mean(hit[m])) for m in masks)
+
+    lo, hi = 1e-6, 1e6
+    for _ in range(80):
+        mid = math.sqrt(lo * hi)
+        if worst(mid) < TARGET_COVERAGE:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
+    """Coefficients of OdometryNoise calibrated on ``samples``."""
+    e = samples.error
+    # heading: P22 = sum_k c_k B_k22
+    h_bases = np.stack([samples.bases[k][:, 2, 2] for k in HEADING_KEYS], axis=1)
+
+    h = _fit_variances(h_bases, e[:, 2] ** 2)
+    hvar = h_bases @ h
+    g = samples.condition
+    s = _scale_to_coverage(lambda f: np.abs(e[:, 2]) <= Z_95 * np.sqrt(f * hvar), g)
+    h = h * s
+    noise = replace(start, **dict(zip(HEADING_KEYS, h.tolist())))
+    # position, with the heading's contribution fixed
+    fixed = sum(getattr(noise, k) * samples.bases[k] for k in HEADING_KEYS)[:, :2, :2]
+    p_bases = [samples.bases[k][:, :2, :2] for k in POSITION_KEYS]
+
+    p = _fit_covariances(fixed, p_bases, e[:, :2])
+    s = _scale_to_coverage(lambda f: mahalanobis2(
+        e[:, :2], fixed + f * sum(ci * b for ci, b in zip(p, p_bases))) <= CHI2_2_95, g)
+    noise = replace(noise, **dict(zip(POSITION_KEYS, (p * s).tolist())))
+    # twist, per axis j: var_j = tv_j + gs_j rho^2 + gl_j L_j^2
+    te = samples.twist_error
+    coeffs = []
+    for j in range(3):
+        basis = np.stack([np.ones(len(te)), samples.slip_basis[:, j], samples.lag_basis[:, j]],
+                         axis=1)
+
+        c = _fit_variances(basis, te[:, j] ** 2)
+        var = basis @ c
+        c = c * _scale_to_coverage(lambda f: np.abs(te[:, j]) <= Z_95 * np.sqrt(f * var), g)
+        coeffs.append(c)
+    coeffs = np.array(coeffs)
+    # a variance of exactly 0 (at rest the encoders are exact) makes a fusion
+    # filter's innovation covariance singular: keep a floor
+    coeffs[:, 0] = np.maximum(coeffs[:, 0], TWIST_VARIANCE_FLOOR)
+    return replace(noise, twist_variance=tuple(coeffs[:, 0].tolist()),
+                   twist_slip_gain=tuple(coeffs[:, 1].tolist()),
+                   twist_lag_gain=tuple(coeffs[:, 2].tolist()))
+
+
+def coverage_table(samples: Samples, noise: OdometryNoise) -> str:
+    """Coverage per condition and pooled (percent)."""
+    head = (f"{'condition':26s} {'samples':>7s} {'position':>8s} {'heading':>8s} "
+            f"{'vx':>6s} {'vy':>6s} {'wz':>6s}")
+    lines = [head, "-" * len(head)]
+    groups = list(dict.fromkeys(samples.condition.tolist())) + ["all"]
+    for group in groups:
+        mask = None if group == "all" else samples.condition == group
+        c = samples.coverage(noise, mask)
+        lines.append(f"{group:26s} {c['samples']:7d} {100 * c['position']:7.1f}% "
+                     f"{100 * c['heading']:7.1f}% {100 * c['vx']:5.1f}% {100 * c['vy']:5.1f}% "
+                     f"{100 * c['wz']:5.1f}%")
+    return "\n".join(lines)
+
+
+def noise_yaml(noise: OdometryNoise, twist_window: float) -> str:
+    """The ``odometry:`` block of a config file for ``noise``."""
+    def g(v):
+        # coefficients the fit drove to nothing print as 0
+        if abs(v) < 1e-15:
+            return "0.0"
+        text = f"{v:.3g}"
+        # YAML 1.1 (PyYAML, rcl) reads 1e-09 as a string: a float needs a dot
+        if "." not in text:
+            mantissa, _, exponent = text.partition("e")
+            text = f"{mantissa}.0" + (f"e{exponent}" if exponent else "")
+        return text
+    return "\n".join([
+        "    odometry:",
+        f"      twist_window: {g(twist_window)}",
+        f"      linear_variance_per_meter: {g(noise.linear_variance_per_meter)}",
+        f"      angular_variance_per_radian: {g(noise.angular_variance_per_radian)}",
+        f"      angular_variance_per_meter: {g(noise.angular_variance_per_meter)}",
+        f"      slip_position_gain: {g(noise.slip_position_gain)}",
+        f"      slip_heading_gain: {g(noise.slip_heading_gain)}",
+        f"      twist_variance: [{', '.join(g(v) for v in noise.twist_variance)}]",
+        f"      twist_slip_gain: [{', '.join(g(v) for v in noise.twist_slip_gain)}]",
+        f"      twist_lag_gain: [{', '.join(g(v) for v in noise.twist_lag_gain)}]",
+    ])
+
+
+def plot(samples: Samples, noise: OdometryNoise, path: str, title: str) -> None:
+    """Error against published sigma (position, heading, vx), one colour per condition."""
+    import matplotlib
+    import matplotlib.ticker
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    P = samples.pose_covariance(noise)
+    tv = samples.twist_variance(noise)
+    e = samples.error
+    panels = [
+        # the ellipse's sigma in the direction of the error, |e| / sqrt(e' P^-1 e):
+        # below the line <=> inside the 95 % ellipse
+        ("position", np.linalg.norm(e[:, :2], axis=1) * 1e3,
+         np.linalg.norm(e[:, :2], axis=1) / np.sqrt(np.maximum(
+             mahalanobis2(e[:, :2], P[:, :2, :2]), 1e-30)) * 1e3, math.sqrt(CHI2_2_95),
+         "sigma of the ellipse along the error [mm]", "|position error| [mm]"),
+        ("heading", np.degrees(np.abs(e[:, 2])), np.degrees(np.sqrt(P[:, 2, 2])), Z_95,
+         "sigma [deg]", "|heading error| [deg]"),
+        ("twist vx", np.abs(samples.twist_error[:, 0]) * 1e3, np.sqrt(tv[:, 0]) * 1e3, Z_95,
+         "sigma [mm/s]", "|vx error| [mm/s]"),
+    ]
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
+    cover = samples.coverage(noise)
+    for ax, (name, err, sig, k, xlabel, ylabel) in zip(axes, panels):
+        for cond in dict.fromkeys(samples.condition.tolist()):
+            m = samples.condition == cond
+            ax.scatter(sig[m], np.maximum(err[m], 1e-6), s=2, alpha=0.35, label=cond)
+        lo = max(np.percentile(sig, 0.5), 1e-6)
+        hi = np.percentile(sig, 99.5) * 1.2
+        xs = np.geomspace(lo, hi, 50)
+        ax.plot(xs, k * xs, "k-", lw=1.5, label=f"{k:.2f} sigma (95 % bound)")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_ylim(max(np.percentile(err, 1), 1e-4), np.max(err) * 1.5)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        key = {"position": "position", "heading": "heading", "twist vx": "vx"}[name]
+        ax.set_title(f"{name}: {100 * cover[key]:.1f} % inside")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=7, markerscale=4, loc="upper left")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = None) -> OdometryNoise:
+    """Print the coverage of the config's noise and, with ``fit_noise``, the
+    calibrated noise, its coverage and its YAML block; optionally plot."""
+    samples = Samples(recordings)
+    cfg = recordings[0].config.controller
+    noise = cfg.noise
+    print(f"\ncoverage of the config's covariance ({recordings[0].robot}, "
+          f"estimator {cfg.estimator}):")
+    print(coverage_table(samples, noise))
+    if fit_noise:
+        noise = fit(samples, noise)
+        print("\ncalibrated coverage:")
+        print(coverage_table(samples, noise))
+        print("\ncalibrated parameters (config file, base_controller: ros__parameters:):")
+        print(noise_yaml(noise, cfg.twist_window))
+    if plot_path:
+        plot(samples, noise, plot_path,
+             f"{recordings[0].robot}: odometry error against the published sigma "
+             f"({len(recordings)} runs)")
+        print(f"plot written to {plot_path}")
+    return noise
