@@ -134,13 +134,19 @@ def cycle_compute(robot: str, cycles: int = 100_000) -> dict:
             "speedup": med["baseline"] / med["compute"], "cycles": cycles}
 
 
-def simulation_speed(robot: str, seconds: float = 10.0, blocks: int = 20) -> dict:
+def simulation_speed(robot: str, seconds: float = 10.0, blocks: int = 20,
+                     ideal_motors: bool = True) -> dict:
     """Real-time factor of the simulator with the controller in the loop, and
-    of raw pybullet stepping of the same generated robot in the same world,
-    in alternating blocks (``seconds`` of simulated time each way)."""
+    of raw ``pybullet.stepSimulation`` of the same generated robot in the same
+    world (no motor model, no hooks), in alternating blocks (``seconds`` of
+    simulated time each way). ``ideal_motors``: pybullet's velocity motors
+    (``sim.ideal_motors``), else the drive model on every joint."""
+    import pybullet as pb
+
     from holonomic_sim.sim_driver import SimDriver
 
-    cfg = load_config(robot, {"cmd_timeout": 0.0, "sim.physics_rate": 1000.0})
+    cfg = load_config(robot, {"cmd_timeout": 0.0, "sim.physics_rate": 1000.0,
+                              "sim.ideal_motors": ideal_motors})
     clock = ManualClock()
     driver = SimDriver(cfg.model, cfg.values, cfg.controller.control_rate)
     driver.configure()
@@ -148,7 +154,7 @@ def simulation_speed(robot: str, seconds: float = 10.0, blocks: int = 20) -> dic
     ctrl.request_enable(True)
     ctrl.step()
     cycles = max(1, int(seconds * cfg.controller.control_rate / blocks))
-    world = driver._world
+    client = driver._world.client
     twist = (0.3, 0.2, 0.5)
     spent = {"controller": 0.0, "raw": 0.0}
     for _ in range(blocks):
@@ -159,12 +165,17 @@ def simulation_speed(robot: str, seconds: float = 10.0, blocks: int = 20) -> dic
             clock.now = ctrl.reading.stamp
         spent["controller"] += time.perf_counter() - t0
         t0 = time.perf_counter()
-        world.step(cycles * driver.substeps)
+        for _ in range(cycles * driver.substeps):
+            pb.stepSimulation(physicsClientId=client)
         spent["raw"] += time.perf_counter() - t0
+    fault = ctrl.fault
     driver.close()
+    if fault:
+        raise RuntimeError(f"{robot}: the controller faulted during the benchmark: {fault}")
     simulated = blocks * cycles / cfg.controller.control_rate
     with_controller, raw = simulated / spent["controller"], simulated / spent["raw"]
-    return {"robot": robot, "with_controller_x": with_controller, "raw_pybullet_x": raw,
+    return {"robot": robot, "motors": "ideal" if ideal_motors else "drive model",
+            "with_controller_x": with_controller, "raw_pybullet_x": raw,
             "ratio": with_controller / raw}
 
 

@@ -61,20 +61,6 @@ def parse_args(argv):
     return parser.parse_args(argv)
 
 
-def _overrides(items, driver):
-    import yaml
-
-    out = {}
-    for item in items:
-        name, sep, text = item.partition(":=")
-        if not sep or not name:
-            raise ValueError(f"-p expects NAME:=VALUE, got {item!r}")
-        out[name.strip()] = yaml.safe_load(text)
-    if driver:
-        out["driver"] = driver
-    return out
-
-
 def _confirm(joint: str, amplitude: float, duration: float) -> bool:
     print(f"holonomic-drive-test: LIFT THE ROBOT so that no wheel touches the floor. "
           f"{joint} will turn at {amplitude:g} rad/s for {duration:g} s, the other joints "
@@ -123,11 +109,13 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     from holonomic_core.controller import load_config
     from holonomic_core.driver import DriverError
-    from holonomic_core.schema import ConfigError
+    from holonomic_core.schema import ConfigError, parse_overrides
     from holonomic_core.step_response import step_response
 
     try:
-        overrides = _overrides(args.param, args.driver)
+        overrides = parse_overrides(args.param)
+        if args.driver:
+            overrides["driver"] = args.driver
         cfg = load_config(args.robot, overrides)
     except (ConfigError, ValueError, OSError) as exc:
         return _error(str(exc))

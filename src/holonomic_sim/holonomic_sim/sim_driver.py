@@ -205,6 +205,13 @@ class SimDriver(Driver):
             return None
         return GroundTruth(self._world.time, self._robot.pose(), self._robot.body_twist())
 
+    def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The floor's contact points on the robot and their planar friction
+        forces, in base_link ([m], [N]; n x 2 each); simulation only."""
+        if self._robot is None:
+            return None
+        return self._robot.wheel_contacts()
+
     def status(self) -> dict[str, str]:
         values = super().status()
         values.update({"physics_rate_hz": f"{self.physics_rate:g}",

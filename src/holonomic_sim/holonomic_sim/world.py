@@ -144,13 +144,24 @@ class SimRobot:
                               localInertiaDiagonal=(diagonal + extra * (1.0 + axis ** 2) / 2.0).tolist(),
                               physicsClientId=cid)
         drives = DriveBank(spec, self._locked_inertia(), self.world.dt, rng)
-        # Coulomb friction: the joint motor, at zero speed, with the friction as its force
-        pb.setJointMotorControlArray(self.body, self.joint_indices, pb.VELOCITY_CONTROL,
-                                     targetVelocities=[0.0] * n,
-                                     forces=drives.coulomb.tolist(), physicsClientId=cid)
         self.drives = drives
+        self._coulomb = drives.coulomb.tolist()
+        self._set_joint_friction(self._coulomb)
+        self._braked = False
         self._drive_velocities = np.zeros(n)
         self._record_drive_states()
+
+    def _set_joint_friction(self, torques: list[float]) -> None:
+        """pybullet's joint motor at zero speed with ``torques`` [N m] as its
+        force: Coulomb friction, or a holding brake."""
+        pb.setJointMotorControlArray(self.body, self.joint_indices, pb.VELOCITY_CONTROL,
+                                     targetVelocities=[0.0] * len(torques), forces=torques,
+                                     physicsClientId=self.world.client)
+
+    def _release_brakes(self) -> None:
+        if self._braked:
+            self._set_joint_friction(self._coulomb)
+            self._braked = False
 
     def _locked_inertia(self) -> np.ndarray:
         """Each joint's inertia [kg m^2] with the base and the other joints
@@ -170,6 +181,7 @@ class SimRobot:
         target = [min(v, m) if v > -m else -m
                   for v, m in zip(np.asarray(velocities, float).tolist(), self._vmax)]
         if self.drives is not None:
+            self._release_brakes()
             self.drives.command_velocities(target)
             return
         self._torque_mode = False
@@ -180,6 +192,7 @@ class SimRobot:
     def command_efforts(self, efforts: np.ndarray) -> None:
         """Joint torques [N m], clipped to the torque limits; applied every step."""
         if self.drives is not None:
+            self._release_brakes()
             self.drives.command_efforts(efforts)
             return
         if not self._torque_mode:
@@ -192,9 +205,13 @@ class SimRobot:
 
     def hold(self) -> None:
         """Brake every joint: zero speed with full torque (a drive holding still),
-        at once (no command delay)."""
+        at once (no command delay). With the drive model: the drives' speed
+        loops reset to zero and each joint's holding brake engaged (a brake
+        torque of max_effort) until the next command."""
         if self.drives is not None:
             self.drives.hold()
+            self._set_joint_friction(self._forces)
+            self._braked = True
             return
         self.command_velocities(np.zeros(len(self.joint_indices)))
 
@@ -236,6 +253,23 @@ class SimRobot:
         velocities = np.array(columns[1])
         efforts = self._efforts.copy() if self._torque_mode else np.array(columns[3])
         return positions, velocities, efforts
+
+    def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray]:
+        """The floor's contacts on this robot now: positions (n x 2) [m] and
+        planar friction forces (n x 2) [N], both in base_link (x, y); one row
+        per contact point pybullet reports (normally one per wheel)."""
+        cid = self.world.client
+        x, y, yaw = self.world_pose()
+        c, s = math.cos(yaw), math.sin(yaw)
+        positions, forces = [], []
+        for point in pb.getContactPoints(bodyA=self.body, bodyB=self.world.floor,
+                                         physicsClientId=cid):
+            px, py = point[5][0] - x, point[5][1] - y
+            fx = point[10] * point[11][0] + point[12] * point[13][0]
+            fy = point[10] * point[11][1] + point[12] * point[13][1]
+            positions.append((c * px + s * py, -s * px + c * py))
+            forces.append((c * fx + s * fy, -s * fx + c * fy))
+        return np.array(positions).reshape(-1, 2), np.array(forces).reshape(-1, 2)
 
     def world_pose(self) -> tuple[float, float, float]:
         """base_link's planar pose in the world [m, m, rad]."""
