@@ -52,7 +52,7 @@ def parse_args(argv):
     parser.add_argument("--driver", choices=sorted(DRIVER_REGISTRY),
                         help="driver backend (default: the config's, normally sim)")
     parser.add_argument("--amplitude", type=float, metavar="RAD_S",
-                        help="step size [rad/s] (default: a tenth of the joint's max_velocity)")
+                        help="step size [rad/s] (default: a quarter of the joint's max_velocity)")
     parser.add_argument("--duration", type=float, default=1.0, metavar="S",
                         help="how long the step is held [s] (default 1.0)")
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
@@ -125,7 +125,7 @@ def main(argv=None) -> int:
                       f"{', '.join(model.joint_names)}")
     index = model.joint_names.index(args.joint)
     vmax = float(model.max_joint_velocity[index])
-    amplitude = 0.1 * vmax if args.amplitude is None else args.amplitude
+    amplitude = 0.25 * vmax if args.amplitude is None else args.amplitude
     if not (math.isfinite(amplitude) and 0.0 < abs(amplitude) <= vmax):
         return _error(f"--amplitude must be non-zero and within the joint's max_velocity "
                       f"(|a| <= {vmax:g} rad/s), got {amplitude:g}")

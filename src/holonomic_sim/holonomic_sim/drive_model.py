@@ -13,7 +13,8 @@ returns and feeds back the joint states. Per joint:
   step then receives the mean torque. Gains from the configured closed-loop
   bandwidth ``f_bw`` and the inertia ``J`` the joint drives with the base held
   still and its wheels off the floor (the joint's links plus the rotor):
-  ``Kp = J w_c``, ``Ki = Kp w_c r_i``, with ``w_c`` such that the closed loop
+  ``Kp = J w_c``, ``Ki = Kp w_c r_i`` (``Kp`` in its sampled-exact form, see
+  the code), with ``w_c`` such that the closed loop
   ``T(s) = w_c (s + r_i w_c) / (s^2 + w_c s + r_i w_c^2)`` has its -3 dB
   point at ``f_bw`` (:func:`crossover`). With ``r_i`` small this is nearly a
   first-order loop of bandwidth ``f_bw`` (10-90 % rise time close to
@@ -123,15 +124,18 @@ class DriveBank:
         self.dt = float(physics_dt)
         gain_factor = 1.0 + spec.spread * rng.uniform(-1.0, 1.0, n)
         friction_factor = 1.0 + spec.spread * rng.uniform(-1.0, 1.0, n)
+        self.substeps = max(1, int(round(spec.loop_rate * self.dt)))
+        self.h = self.dt / self.substeps
         omega = crossover(spec.bandwidth, spec.integral_ratio)
+        # Kp = J (1 - exp(-w_c h)) / h rather than J w_c: the sampled loop
+        # v[k+1] = v[k] + h Kp (v* - v[k]) / J then has the pole exp(-w_c h)
+        # of the continuous one (J w_c would make it 15 % faster at w_c h = 0.25)
         #: [N m s/rad] and [N m/rad] per joint, spread included
-        self.kp = self.inertia * omega * gain_factor
+        self.kp = self.inertia * (-math.expm1(-omega * self.h) / self.h) * gain_factor
         self.ki = self.kp * omega * spec.integral_ratio
         self.coulomb = spec.coulomb * friction_factor
         self.viscous = spec.viscous * friction_factor
         self.torque_limit = np.asarray(spec.torque_limit, float)
-        self.substeps = max(1, int(round(spec.loop_rate * self.dt)))
-        self.h = self.dt / self.substeps
         self._ki_h = self.ki * self.h
         self._h_over_j = self.h / self.inertia
         self._cmd_steps = int(round(spec.command_delay / self.dt))

@@ -13,7 +13,16 @@ This reproduces it with the real control stack (``BaseController`` and the
 * every joint reading is recorded once, and each estimator integrates the
   same recording -- the estimators are compared on identical motion;
 * the final error is ``|odometry - ground truth|`` at the end (position, m;
-  heading, rad), over ``--seeds`` seeds x the slip conditions.
+  heading, rad), over ``--seeds`` seeds x the conditions;
+* the internal force -- the part of the wheels' contact forces that produces
+  no net force or moment on the base (:mod:`holonomic_sim.contact_forces`),
+  the wheels fighting each other -- is sampled every control cycle (RMS).
+
+Conditions: the slip conditions on ideal motors (pybullet's velocity motors,
+the reference) and on the drive model (velocity loops with a per-joint spread
+of gains and friction, torque limits, rotor inertia, delays: the simulator's
+default). ``-p NAME:=VALUE`` changes the drive model (e.g. its bandwidth or
+spread) for a sweep.
 
 Prints a table (mean and median per estimator and condition, and the ratios
 to ``pinv``) and, with ``--json``, writes every trial.
@@ -34,16 +43,25 @@ from holonomic_core.controller import BaseController, load_config
 from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.loop import ManualClock
 from holonomic_core.odometry import Odometry, wrap_angle
-from holonomic_core.schema import ConfigError
+from holonomic_core.schema import ConfigError, parse_overrides
+from holonomic_sim.contact_forces import internal_force
 
 #: slip conditions: name -> simulator overrides (per-wheel friction spread is
 #: re-drawn from each trial's seed)
+_IDEAL = {"sim.ideal_motors": True}
+_DRIVES = {"sim.ideal_motors": False}
 CONDITIONS = {
-    "nominal (mu 1.0)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0},
-    "uneven (mu 0.8 +-40 %)": {"sim.wheel_friction": 0.8, "sim.friction_spread": 0.4},
-    "slippery (mu 0.3 +-30 %)": {"sim.wheel_friction": 0.3, "sim.friction_spread": 0.3},
+    "nominal (mu 1.0)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0, **_IDEAL},
+    "uneven (mu 0.8 +-40 %)": {"sim.wheel_friction": 0.8, "sim.friction_spread": 0.4,
+                               **_IDEAL},
+    "slippery (mu 0.3 +-30 %)": {"sim.wheel_friction": 0.3, "sim.friction_spread": 0.3,
+                                 **_IDEAL},
     "worn tyres (r +-2 %)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0,
-                             "sim.wheel_radius_spread": 0.02},
+                             "sim.wheel_radius_spread": 0.02, **_IDEAL},
+    "drives, nominal (mu 1.0)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0,
+                                 **_DRIVES},
+    "drives, uneven (mu 0.8 +-40 %)": {"sim.wheel_friction": 0.8, "sim.friction_spread": 0.4,
+                                       **_DRIVES},
 }
 
 
@@ -56,6 +74,7 @@ class Trial:
     position_error: dict = field(default_factory=dict)   # estimator -> [m]
     heading_error: dict = field(default_factory=dict)    # estimator -> [rad]
     seconds: float = 0.0                 # [s] wall time of the simulation
+    internal_force_rms: float = 0.0      # [N] RMS of |f_int| over the run
 
 
 def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, float, float]:
@@ -70,9 +89,13 @@ def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, flo
 
 
 def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
-              area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0) -> Trial:
-    """One random run and return; the final error of every estimator."""
+              area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0,
+              drive_overrides: dict | None = None) -> Trial:
+    """One random run and return; the final error of every estimator.
+    ``drive_overrides``: parameters applied to the drive-model conditions."""
     overrides = dict(CONDITIONS[condition])
+    if not overrides["sim.ideal_motors"]:
+        overrides.update(drive_overrides or {})
     overrides.update({"sim.seed": seed, "cmd_timeout": 0.0, "enable_on_start": True})
     for axis in ("x", "y"):
         overrides[f"limits.linear.{axis}.max_velocity"] = speed
@@ -85,6 +108,7 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
     wz_max = min(1.5, cfg.controller.max_velocity[2])
     readings = []
     truths = []
+    internal = []
     t_wall = time.perf_counter()
     with driver:
         ctrl = BaseController(cfg, driver, clock=clock)
@@ -95,6 +119,8 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
             clock.now = ctrl.reading.stamp
             readings.append((ctrl.reading.stamp, ctrl.reading.positions.copy()))
             truths.append(driver.ground_truth().pose.copy())
+            positions, forces = driver.wheel_contacts()
+            internal.append(float(np.linalg.norm(internal_force(positions, forces))))
 
         step()
         half = np.array(area) / 2.0
@@ -123,7 +149,8 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
     path = np.array(truths)
     trial = Trial(robot, condition, seed,
                   float(np.sum(np.linalg.norm(np.diff(path[:, :2], axis=0), axis=1))),
-                  seconds=time.perf_counter() - t_wall)
+                  seconds=time.perf_counter() - t_wall,
+                  internal_force_rms=float(np.sqrt(np.mean(np.square(internal)))))
     for estimator in ESTIMATORS:
         odo = Odometry(cfg.model, estimator, cfg.controller.noise)
         for stamp, positions in readings:
@@ -137,7 +164,7 @@ def summarize(trials: list[Trial]) -> str:
     """The table: per condition and estimator, mean/median errors, ratios to
     pinv and in how many runs the estimator ended closer than pinv."""
     lines = []
-    head = (f"{'condition':26s} {'estimator':9s} {'mean err':>9s} {'median':>8s} "
+    head = (f"{'condition':30s} {'estimator':9s} {'mean err':>9s} {'median':>8s} "
             f"{'mean hdg':>9s} {'mean/pinv':>9s} {'median/pinv':>11s} {'< pinv':>7s}")
     lines += [head, "-" * len(head)]
     for condition in dict.fromkeys(t.condition for t in trials):
@@ -147,12 +174,14 @@ def summarize(trials: list[Trial]) -> str:
         for e in ESTIMATORS:
             mean, median = pos[e].mean(), np.median(pos[e])
             lines.append(
-                f"{condition:26s} {e:9s} {mean * 1000:7.1f}mm {median * 1000:6.1f}mm "
+                f"{condition:30s} {e:9s} {mean * 1000:7.1f}mm {median * 1000:6.1f}mm "
                 f"{math.degrees(hdg[e].mean()):7.2f}deg {mean / pos['pinv'].mean():9.2f} "
                 f"{median / np.median(pos['pinv']):11.2f} "
                 f"{'' if e == 'pinv' else str(int(np.sum(pos[e] < pos['pinv']))):>7s}")
         dist = np.mean([t.distance for t in group])
-        lines.append(f"{'':26s} ({len(group)} runs, mean true path {dist:.1f} m)")
+        force = np.mean([t.internal_force_rms for t in group])
+        lines.append(f"{'':30s} ({len(group)} runs, mean true path {dist:.1f} m, "
+                     f"internal force RMS {force:.1f} N)")
     return "\n".join(lines)
 
 
@@ -166,20 +195,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--acceleration", type=float, default=2.0, help="[m/s^2]")
     parser.add_argument("--condition", action="append", choices=list(CONDITIONS),
                         help="slip condition(s) (default: all)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override a parameter in the drive-model conditions, "
+                             "e.g. -p sim.drive.spread:=0.3")
     parser.add_argument("--json", metavar="FILE", help="write every trial to FILE")
     args = parser.parse_args(argv)
+    try:
+        drive_overrides = parse_overrides(args.param)
+    except ValueError as exc:
+        parser.error(str(exc))
     trials = []
     for condition in args.condition or list(CONDITIONS):
         for seed in range(args.seeds):
             try:
                 trial = run_trial(args.robot, condition, seed, args.duration,
-                                  speed=args.speed, acceleration=args.acceleration)
+                                  speed=args.speed, acceleration=args.acceleration,
+                                  drive_overrides=drive_overrides)
             except ConfigError as exc:      # e.g. per-wheel radii on a DDROT
                 print(f"{condition}: skipped for {args.robot} ({exc})", file=sys.stderr)
                 break
             trials.append(trial)
             errs = "  ".join(f"{e} {trial.position_error[e] * 1000:6.1f}mm" for e in ESTIMATORS)
-            print(f"{condition:26s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
+            print(f"{condition:30s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
                   f"({trial.seconds:.1f} s)", file=sys.stderr, flush=True)
     print(summarize(trials))
     if args.json:
