@@ -70,12 +70,14 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
     parser.add_argument("--render", type=Path, metavar="JSON",
                         help="only rewrite the page from a previous run's results")
-    parser.add_argument("--only", choices=("sim_drive",),
-                        help="re-run only these rows; the page keeps the last run's others")
+    parser.add_argument("--only", choices=("sim",),
+                        help="re-run only the simulation-speed rows (ideal motors and drive "
+                             "model); the page keeps the last run's others")
     args = parser.parse_args(argv)
     if args.only:
         saved = json.loads(args.out.with_suffix(".json").read_text())
         t0 = time.monotonic()
+        saved["results"]["sim"] = sim_rows(_step, args.quick)
         saved["results"]["sim_drive"] = sim_drive_rows(_step, args.quick)
         saved.setdefault("reruns", {})[args.only] = (
             datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
@@ -103,8 +105,7 @@ def main(argv=None) -> int:
     cycles = 20_000 if quick else 100_000
     results["compute"] = [step(f"cycle compute {r}", compute.cycle_compute, r, cycles)
                           for r in ("hamr", "xr4000")]
-    results["sim"] = [step(f"simulation speed {r}", compute.simulation_speed, r,
-                           5.0 if quick else 20.0) for r in ("hamr", "xr4000")]
+    results["sim"] = sim_rows(step, quick)
     results["sim_drive"] = sim_drive_rows(step, quick)
     results["fleet"] = step("fleet", compute.fleet_speed, "hamr",
                             (1, 4, 8) if quick else (1, 2, 4, 8, 16, 24, 32, 40, 48),
@@ -127,6 +128,12 @@ def main(argv=None) -> int:
     write_page(args.out, table, saved, elapsed, quick)
     print(f"bench: wrote {args.out} ({elapsed / 60:.1f} min)", file=sys.stderr)
     return 0
+
+
+def sim_rows(step, quick: bool) -> list[dict]:
+    """Simulation speed with ideal motors (``sim.ideal_motors``) against raw pybullet."""
+    return [step(f"simulation speed {r}", compute.simulation_speed, r, 5.0 if quick else 20.0)
+            for r in ("hamr", "xr4000")]
 
 
 def sim_drive_rows(step, quick: bool) -> list[dict]:
@@ -246,11 +253,11 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   stamping each message with the system clock; a plain subscriber in this process gives DDS's
   one-way latency for the same messages.
 - **Simulation speed**: `BaseController` + `sim` driver stepped as fast as possible (1 kHz
-  physics, 200 Hz control, a constant twist), against `pybullet.stepSimulation` of the same
-  generated robot in the same world, same run; once with ideal motors (`sim.ideal_motors`) and
-  once with the drive model on every joint (the default: a velocity loop, a `TORQUE_CONTROL`
-  call and a joint-state read per physics step). `python bench/run.py --only sim_drive`
-  re-runs just the drive-model rows and rewrites the page with the other rows of the last run.
+  physics, 200 Hz control, a constant twist), against raw pybullet: the time the
+  `pybullet.stepSimulation` calls of the same run take alone (each timed); once with ideal
+  motors (`sim.ideal_motors`) and once with the drive model on every joint (the default: a
+  velocity loop, a `TORQUE_CONTROL` call and a joint-state read per physics step), timed
+  call by call in the same run. `python bench/run.py --only sim` re-runs just these four rows and rewrites the page with the other rows of the last run.
 - **Fleet**: N robots in one world, a `BaseController` each, one loop (the `--fleet` runner's
   cycle), no ROS.
 - **Memory**: `holonomic-bringup hamr --enable` (simulator) driven by `cmd_vel` at 20 Hz for the

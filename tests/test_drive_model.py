@@ -131,7 +131,7 @@ DEFAULT_RISE = math.log(9) / (2 * math.pi * 40.0)
     ("xr4000", "front_left_wheel_joint", 6.0),
     ("xr4000", "rear_right_steer_joint", 3.0),
     ("hamr", "right_wheel_joint", 5.0),
-    # the turret turns the whole drive base (0.7 kg m^2): Kp = 190 N m s/rad, so
+    # the turret turns the whole drive base (0.7 kg m^2): Kp ~ 160 N m s/rad, so
     # a step that stays inside the 15 N m limit is small
     ("hamr", "turret_joint", 0.05),
 ])

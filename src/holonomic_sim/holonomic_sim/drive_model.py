@@ -136,19 +136,25 @@ class DriveBank:
         self.coulomb = spec.coulomb * friction_factor
         self.viscous = spec.viscous * friction_factor
         self.torque_limit = np.asarray(spec.torque_limit, float)
-        self._ki_h = self.ki * self.h
-        self._h_over_j = self.h / self.inertia
         self._cmd_steps = int(round(spec.command_delay / self.dt))
         self._fb_steps = int(round(spec.feedback_delay / self.dt))
         self._pending: deque = deque()          # (apply at step, torque mode?, values)
-        self._target = np.zeros(n)              # [rad/s] or [N m], in effect
         self._torque_mode = False
-        self._integral = np.zeros(n)            # [N m]
         self._step = 0
         self._history: deque = deque(maxlen=self._fb_steps + 1)
         self._count_angle = 2.0 * math.pi / spec.counts_per_joint_turn
-        #: [N m] motor torque of the last step (what a drive reports as its current)
-        self.torque = np.zeros(n)
+        # The per-step path runs on Python floats: for 3-8 joints a loop over
+        # floats costs a third of the same dozen numpy calls on tiny arrays
+        # (the simulator's speed target: docs/benchmarks.md).
+        self._kp = self.kp.tolist()
+        self._ki_h = (self.ki * self.h).tolist()
+        self._h_over_j = (self.h / self.inertia).tolist()
+        self._limit = self.torque_limit.tolist()
+        self._viscous = self.viscous.tolist()
+        self._target = [0.0] * n                # [rad/s] or [N m], in effect
+        self._integral = [0.0] * n              # [N m]
+        self._torque = [0.0] * n
+        self._joints = range(n)
 
     # -- commands (control rate) ---------------------------------------------------
     def command_velocities(self, velocities: np.ndarray) -> None:
@@ -164,13 +170,18 @@ class DriveBank:
         """Zero speed now, no delay (the drive's own brake / stop ramp), loop reset."""
         self._pending.clear()
         self._torque_mode = False
-        self._target = np.zeros(self.n)
-        self._integral[:] = 0.0
+        self._target = [0.0] * self.n
+        self._integral = [0.0] * self.n
 
     def _push(self, torque_mode: bool, values: np.ndarray) -> None:
         if values.shape != (self.n,):
             raise ValueError(f"{self.n} joint values expected, got {values.shape}")
-        self._pending.append((self._step + self._cmd_steps, torque_mode, values))
+        self._pending.append((self._step + self._cmd_steps, torque_mode, values.tolist()))
+
+    @property
+    def torque(self) -> np.ndarray:
+        """Motor torque of the last step [N m] (what a drive reports as its current)."""
+        return np.array(self._torque)
 
     @property
     def torque_mode(self) -> bool:
@@ -178,7 +189,7 @@ class DriveBank:
         return self._torque_mode
 
     # -- physics step ------------------------------------------------------------
-    def torques(self, velocities: np.ndarray) -> np.ndarray:
+    def torques(self, velocities) -> list[float]:
         """Joint torques [N m] to apply during the coming physics step, from
         the joint speeds ``velocities`` [rad/s] at its start (viscous friction
         included; Coulomb friction is applied by the physics)."""
@@ -186,44 +197,52 @@ class DriveBank:
         while pending and pending[0][0] <= self._step:
             _, mode, values = pending.popleft()
             if mode != self._torque_mode:
-                self._integral[:] = 0.0
+                self._integral = [0.0] * self.n
             self._torque_mode, self._target = mode, values
         self._step += 1
         if self._torque_mode:
             tau = self._target
         elif self.substeps == 1:
-            tau = self._pi(self._target - velocities)
+            tau = self._pi(velocities)
         else:
-            v = np.array(velocities, float)
-            total = np.zeros(self.n)
+            v = list(velocities)
+            total = [0.0] * self.n
+            h_over_j, viscous = self._h_over_j, self._viscous
             for _ in range(self.substeps):
-                tau = self._pi(self._target - v)
-                v += (tau - self.viscous * v) * self._h_over_j
-                total += tau
-            tau = total / self.substeps
-        self.torque = tau
-        return tau - self.viscous * velocities
+                tau = self._pi(v)
+                for i in self._joints:
+                    v[i] += (tau[i] - viscous[i] * v[i]) * h_over_j[i]
+                    total[i] += tau[i]
+            tau = [t / self.substeps for t in total]
+        self._torque = tau
+        viscous = self._viscous
+        return [tau[i] - viscous[i] * velocities[i] for i in self._joints]
 
-    def _pi(self, error: np.ndarray) -> np.ndarray:
-        """One loop cycle: PI with conditional integration [N m]."""
-        limit = self.torque_limit
-        integral = self._integral + self._ki_h * error
-        raw = self.kp * error + integral
-        tau = np.minimum(np.maximum(raw, -limit), limit)
-        # keep the new integral only where the output is not saturated, or
-        # where integrating drives it back out of saturation
-        keep = (raw == tau) | (np.sign(error) != np.sign(raw))
-        self._integral = np.where(keep, integral, self._integral)
+    def _pi(self, velocities) -> list[float]:
+        """One loop cycle: PI on ``target - velocities`` with conditional
+        integration (the integral is kept only where the output is not
+        saturated, or where integrating drives it back out) [N m]."""
+        target, integral, kp, ki_h, limit = (self._target, self._integral, self._kp,
+                                             self._ki_h, self._limit)
+        tau = [0.0] * self.n
+        for i in self._joints:
+            error = target[i] - velocities[i]
+            new = integral[i] + ki_h[i] * error
+            raw = kp[i] * error + new
+            out = min(max(raw, -limit[i]), limit[i])
+            if out == raw or (error > 0.0) != (raw > 0.0):
+                integral[i] = new
+            tau[i] = out
         return tau
 
     # -- feedback -----------------------------------------------------------------
-    def record(self, positions: np.ndarray, velocities: np.ndarray) -> None:
-        """The joint states after a physics step [rad, rad/s]."""
+    def record(self, positions, velocities) -> None:
+        """The joint states after a physics step [rad, rad/s] (sequences)."""
         self._history.append((positions, velocities))
 
     def feedback(self) -> tuple[np.ndarray, np.ndarray]:
         """Positions [rad] (whole encoder counts) and speeds [rad/s] as the
         driver receives them: ``feedback_delay`` old (or the oldest recorded)."""
         positions, velocities = self._history[0]
-        counts = np.floor(positions / self._count_angle + 0.5)
-        return counts * self._count_angle, velocities.copy()
+        counts = np.floor(np.asarray(positions, float) / self._count_angle + 0.5)
+        return counts * self._count_angle, np.array(velocities, float)

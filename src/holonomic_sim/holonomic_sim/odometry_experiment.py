@@ -75,6 +75,7 @@ class Trial:
     heading_error: dict = field(default_factory=dict)    # estimator -> [rad]
     seconds: float = 0.0                 # [s] wall time of the simulation
     internal_force_rms: float = 0.0      # [N] RMS of |f_int| over the run
+    fault: str | None = None             # the controller's fault, if it stopped the run
 
 
 def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, float, float]:
@@ -145,12 +146,14 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
         ctrl.set_command((0.0, 0.0, 0.0))
         for _ in range(int(0.5 * cfg.controller.control_rate)):
             step()
+        fault = ctrl.fault
     truth_end = truths[-1]
     path = np.array(truths)
     trial = Trial(robot, condition, seed,
                   float(np.sum(np.linalg.norm(np.diff(path[:, :2], axis=0), axis=1))),
                   seconds=time.perf_counter() - t_wall,
-                  internal_force_rms=float(np.sqrt(np.mean(np.square(internal)))))
+                  internal_force_rms=float(np.sqrt(np.mean(np.square(internal)))),
+                  fault=None if fault is None else str(fault))
     for estimator in ESTIMATORS:
         odo = Odometry(cfg.model, estimator, cfg.controller.noise)
         for stamp, positions in readings:
@@ -180,8 +183,11 @@ def summarize(trials: list[Trial]) -> str:
                 f"{'' if e == 'pinv' else str(int(np.sum(pos[e] < pos['pinv']))):>7s}")
         dist = np.mean([t.distance for t in group])
         force = np.mean([t.internal_force_rms for t in group])
+        faults = sum(t.fault is not None for t in group)
         lines.append(f"{'':30s} ({len(group)} runs, mean true path {dist:.1f} m, "
-                     f"internal force RMS {force:.1f} N)")
+                     f"internal force RMS {force:.1f} N"
+                     + (f"; the controller faulted in {faults}: see --json" if faults else "")
+                     + ")")
     return "\n".join(lines)
 
 
@@ -217,7 +223,8 @@ def main(argv: list[str] | None = None) -> int:
             trials.append(trial)
             errs = "  ".join(f"{e} {trial.position_error[e] * 1000:6.1f}mm" for e in ESTIMATORS)
             print(f"{condition:30s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
-                  f"({trial.seconds:.1f} s)", file=sys.stderr, flush=True)
+                  f"({trial.seconds:.1f} s){'  FAULT: ' + trial.fault if trial.fault else ''}",
+                  file=sys.stderr, flush=True)
     print(summarize(trials))
     if args.json:
         with open(args.json, "w") as handle:

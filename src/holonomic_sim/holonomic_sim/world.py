@@ -131,7 +131,6 @@ class SimRobot:
         from holonomic_sim.drive_model import DriveBank
 
         cid = self.world.client
-        n = len(self.joint_indices)
         # the rotor spins N times faster than the joint: N^2 J_rotor about the
         # joint axis, added to the child link's inertia (the link's inertial
         # frames are unrotated, so the axis is a principal axis) as a thin
@@ -140,15 +139,13 @@ class SimRobot:
         for joint, extra in zip(self.joint_indices, spec.reflected_inertia.tolist()):
             axis = np.abs(np.array(pb.getJointInfo(self.body, joint, physicsClientId=cid)[13]))
             diagonal = np.array(pb.getDynamicsInfo(self.body, joint, physicsClientId=cid)[2])
-            pb.changeDynamics(self.body, joint,
-                              localInertiaDiagonal=(diagonal + extra * (1.0 + axis ** 2) / 2.0).tolist(),
+            disc = extra * (1.0 + axis ** 2) / 2.0
+            pb.changeDynamics(self.body, joint, localInertiaDiagonal=(diagonal + disc).tolist(),
                               physicsClientId=cid)
-        drives = DriveBank(spec, self._locked_inertia(), self.world.dt, rng)
-        self.drives = drives
-        self._coulomb = drives.coulomb.tolist()
+        self.drives = DriveBank(spec, self._locked_inertia(), self.world.dt, rng)
+        self._coulomb = self.drives.coulomb.tolist()
         self._set_joint_friction(self._coulomb)
         self._braked = False
-        self._drive_velocities = np.zeros(n)
         self._record_drive_states()
 
     def _set_joint_friction(self, torques: list[float]) -> None:
@@ -218,9 +215,8 @@ class SimRobot:
     def before_step(self) -> None:
         # TORQUE_CONTROL forces last one simulation step in pybullet.
         if self.drives is not None:
-            torques = self.drives.torques(self._drive_velocities)
             pb.setJointMotorControlArray(self.body, self.joint_indices, pb.TORQUE_CONTROL,
-                                         forces=torques.tolist(),
+                                         forces=self.drives.torques(self._drive_velocities),
                                          physicsClientId=self.world.client)
         elif self._torque_mode:
             pb.setJointMotorControlArray(self.body, self.joint_indices, pb.TORQUE_CONTROL,
@@ -234,9 +230,8 @@ class SimRobot:
     def _record_drive_states(self) -> None:
         states = pb.getJointStates(self.body, self.joint_indices,
                                    physicsClientId=self.world.client)
-        columns = list(zip(*states))
-        self._drive_velocities = np.array(columns[1])
-        self.drives.record(np.array(columns[0]), self._drive_velocities)
+        self._drive_velocities = [state[1] for state in states]
+        self.drives.record([state[0] for state in states], self._drive_velocities)
 
     # -- sensors ----------------------------------------------------------------
     def joint_states(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
