@@ -12,6 +12,8 @@ second is measured:
   caster, mean and max) -- what a distribution that fights itself produces;
 * peak traction: the largest friction force of any wheel on the floor
   (pybullet's contact points), i.e. how close to losing grip the base runs;
+* a controller fault (e.g. the reading monitor's tracking check on a wheel
+  that spins) ends the run; the row says when and why;
 * internal force: the part of the wheels' contact forces that produces no
   net force or moment on the base (:mod:`holonomic_sim.contact_forces`:
   ``|(I - W^+ W) f|``), RMS and max -- wheels pushing against each other.
@@ -153,6 +155,7 @@ def run(robot: str, trajectory: str, mode: str, friction: float = 1.0,
     clock = ManualClock()
     driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
     errors, headings, slip, traction, internal = [], [], [], [], []
+    fault = None
     with driver:
         ctrl = BaseController(cfg, driver, clock=clock)
         if mode.endswith("pinv(C)^T"):
@@ -165,9 +168,10 @@ def run(robot: str, trajectory: str, mode: str, friction: float = 1.0,
         while clock.now - start < duration:
             ctrl.step()
             clock.now = ctrl.reading.stamp
-            if ctrl.fault is not None:
-                raise RuntimeError(f"{mode} on {trajectory}: controller fault: {ctrl.fault}")
             t = clock.now - start
+            if ctrl.fault is not None:            # the run ends here; the row says so
+                fault = f"fault at {t:.1f} s: {ctrl.fault}"
+                break
             if t < duration / 2:
                 continue                      # the first lap settles the start
             ref = sample(t)
@@ -180,8 +184,10 @@ def run(robot: str, trajectory: str, mode: str, friction: float = 1.0,
             peak, inner = _contact_figures(driver)
             traction.append(peak)
             internal.append(inner)
+    if not errors:
+        return {"trajectory": trajectory, "mode": mode, "motors": motors, "fault": fault}
     slip = np.array(slip)
-    return {"trajectory": trajectory, "mode": mode, "motors": motors,
+    return {"trajectory": trajectory, "mode": mode, "motors": motors, "fault": fault,
             "rms_mm": 1e3 * float(np.sqrt(np.mean(np.square(errors)))),
             "max_mm": 1e3 * float(np.max(errors)),
             "max_heading_deg": math.degrees(float(np.max(headings))),
@@ -196,7 +202,13 @@ def table(rows) -> str:
             "| slip max | peak traction | internal force RMS | max |")
     out = [head, "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        out.append(f"| {r['trajectory']} | {r['motors']} | {r['mode']} | {r['rms_mm']:.1f} mm | "
+        if "rms_mm" not in r:                     # faulted before the measured lap
+            out.append(f"| {r['trajectory']} | {r['motors']} | {r['mode']} | "
+                       f"{r['fault']} |" + " |" * 9)
+            continue
+        mode = r["mode"] + (f" ({r['fault']}; the rest of the lap not measured)"
+                            if r["fault"] else "")
+        out.append(f"| {r['trajectory']} | {r['motors']} | {mode} | {r['rms_mm']:.1f} mm | "
                    f"{r['max_mm']:.1f} mm | {r['max_heading_deg']:.2f} deg | "
                    f"{r['slip_mean_mm_s']:.2f} mm/s | {r['slip_max_mm_s']:.1f} mm/s | "
                    f"{r['peak_traction_n']:.0f} N | {r['internal_rms_n']:.1f} N | "
