@@ -200,14 +200,30 @@ class DriveBank:
                 self._integral = [0.0] * self.n
             self._torque_mode, self._target = mode, values
         self._step += 1
+        viscous = self._viscous
         if self._torque_mode:
             tau = self._target
         elif self.substeps == 1:
-            tau = self._pi(velocities)
+            # _pi inlined, with the viscous term (the path of every physics step)
+            target, integral, kp, ki_h, limit = (self._target, self._integral, self._kp,
+                                                 self._ki_h, self._limit)
+            tau, out = [0.0] * self.n, [0.0] * self.n
+            for i in self._joints:
+                v = velocities[i]
+                error = target[i] - v
+                new = integral[i] + ki_h[i] * error
+                raw = kp[i] * error + new
+                t = min(max(raw, -limit[i]), limit[i])
+                if t == raw or (error > 0.0) != (raw > 0.0):
+                    integral[i] = new
+                tau[i] = t
+                out[i] = t - viscous[i] * v
+            self._torque = tau
+            return out
         else:
             v = list(velocities)
             total = [0.0] * self.n
-            h_over_j, viscous = self._h_over_j, self._viscous
+            h_over_j = self._h_over_j
             for _ in range(self.substeps):
                 tau = self._pi(v)
                 for i in self._joints:
@@ -215,7 +231,6 @@ class DriveBank:
                     total[i] += tau[i]
             tau = [t / self.substeps for t in total]
         self._torque = tau
-        viscous = self._viscous
         return [tau[i] - viscous[i] * velocities[i] for i in self._joints]
 
     def _pi(self, velocities) -> list[float]:
