@@ -231,6 +231,15 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   small fraction of the period. Holding 1 kHz hard needs the loop outside the GIL -- a real-time
   thread (SCHED_FIFO, which needs CAP_SYS_NICE) in a compiled process (ros2_control's
   controller_manager is the usual answer) -- not more Python tuning.
+- **Simulation speed with the drive model ≥ 60 % of raw pybullet (HAMR).** The drive model
+  makes the physics itself cheaper (joint torques and weak friction motors instead of
+  pybullet's stiff velocity motors: raw stepping of the HAMR runs about twice as fast as with
+  ideal motors), so the simulator with the drive model runs *faster* than with ideal motors;
+  but its fixed Python cost per physics step (one joint-state read, the velocity loops, one
+  `TORQUE_CONTROL` call: about 11 µs of CPU per step for three joints, measured with
+  `process_time`) and the controller weigh more against that cheaper step. The XR4000, whose
+  physics costs more per step, meets it. Meeting it for the HAMR needs the per-step drive loop
+  out of the interpreter (a compiled loop or a pybullet plugin), not more Python tuning.
 """
     text += f"""
 
