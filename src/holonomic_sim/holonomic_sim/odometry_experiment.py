@@ -46,10 +46,10 @@ from holonomic_core.odometry import Odometry, wrap_angle
 from holonomic_core.schema import ConfigError, parse_overrides
 from holonomic_sim.contact_forces import internal_force
 
-#: slip conditions: name -> simulator overrides (per-wheel friction spread is
-#: re-drawn from each trial's seed)
 _IDEAL = {"sim.ideal_motors": True}
 _DRIVES = {"sim.ideal_motors": False}
+#: conditions: name -> simulator overrides (per-wheel friction spread and the
+#: drives' per-joint spread are re-drawn from each trial's seed)
 CONDITIONS = {
     "nominal (mu 1.0)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0, **_IDEAL},
     "uneven (mu 0.8 +-40 %)": {"sim.wheel_friction": 0.8, "sim.friction_spread": 0.4,
