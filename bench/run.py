@@ -236,8 +236,7 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   pybullet's stiff velocity motors: raw stepping of the HAMR runs about twice as fast as with
   ideal motors), so the simulator with the drive model runs *faster* than with ideal motors;
   but its fixed Python cost per physics step (one joint-state read, the velocity loops, one
-  `TORQUE_CONTROL` call: about 11 µs of CPU per step for three joints, measured with
-  `process_time`) and the controller weigh more against that cheaper step. The XR4000, whose
+  `TORQUE_CONTROL` call) and the controller's weigh more against that cheaper step. The XR4000, whose
   physics costs more per step, meets it. Meeting it for the HAMR needs the per-step drive loop
   out of the interpreter (a compiled loop or a pybullet plugin), not more Python tuning.
 """
