@@ -236,9 +236,9 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   pybullet's stiff velocity motors: raw stepping of the HAMR runs about twice as fast as with
   ideal motors), so the simulator with the drive model runs *faster* than with ideal motors;
   but its fixed Python cost per physics step (one joint-state read, the velocity loops, one
-  `TORQUE_CONTROL` call) and the controller's weigh more against that cheaper step. The XR4000, whose
-  physics costs more per step, meets it. Meeting it for the HAMR needs the per-step drive loop
-  out of the interpreter (a compiled loop or a pybullet plugin), not more Python tuning.
+  `TORQUE_CONTROL` call) and the controller's weigh more against that cheaper step. The
+  XR4000, whose physics costs more per step, meets it. Meeting it for the HAMR needs both the
+  per-step drive loop and the control cycle cheaper (compiled), not more Python tuning.
 """
     text += f"""
 
@@ -265,7 +265,8 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   `pybullet.stepSimulation` calls of the same run take alone (each timed); once with ideal
   motors (`sim.ideal_motors`) and once with the drive model on every joint (the default: a
   velocity loop, a `TORQUE_CONTROL` call and a joint-state read per physics step), timed
-  call by call in the same run. `python bench/run.py --only sim` re-runs just these four rows and rewrites the page with the other rows of the last run.
+  call by call in the same run. `python bench/run.py --only sim` re-runs just these four
+  rows and rewrites the page with the other rows of the last run.
 - **Fleet**: N robots in one world, a `BaseController` each, one loop (the `--fleet` runner's
   cycle), no ROS.
 - **Memory**: `holonomic-bringup hamr --enable` (simulator) driven by `cmd_vel` at 20 Hz for the
