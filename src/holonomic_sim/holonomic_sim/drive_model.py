@@ -204,22 +204,7 @@ class DriveBank:
         if self._torque_mode:
             tau = self._target
         elif self.substeps == 1:
-            # _pi inlined, with the viscous term (the path of every physics step)
-            target, integral, kp, ki_h, limit = (self._target, self._integral, self._kp,
-                                                 self._ki_h, self._limit)
-            tau, out = [0.0] * self.n, [0.0] * self.n
-            for i in self._joints:
-                v = velocities[i]
-                error = target[i] - v
-                new = integral[i] + ki_h[i] * error
-                raw = kp[i] * error + new
-                t = min(max(raw, -limit[i]), limit[i])
-                if t == raw or (error > 0.0) != (raw > 0.0):
-                    integral[i] = new
-                tau[i] = t
-                out[i] = t - viscous[i] * v
-            self._torque = tau
-            return out
+            tau = self._pi(velocities)
         else:
             v = list(velocities)
             total = [0.0] * self.n
