@@ -233,8 +233,8 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   controller_manager is the usual answer) -- not more Python tuning.
 - **Simulation speed with the drive model ≥ 60 % of raw pybullet (HAMR).** The drive model
   makes the physics itself cheaper (joint torques and weak friction motors instead of
-  pybullet's stiff velocity motors: raw stepping of the HAMR runs about twice as fast as with
-  ideal motors), so the simulator with the drive model runs *faster* than with ideal motors;
+  pybullet's stiff velocity motors: raw stepping of the HAMR ran 1.6-2× as fast as with ideal
+  motors in our runs), so the simulator with the drive model runs *faster* than with ideal motors;
   but its fixed Python cost per physics step (one joint-state read, the velocity loops, one
   `TORQUE_CONTROL` call) and the controller's weigh more against that cheaper step. The
   XR4000, whose physics costs more per step, meets it. Meeting it for the HAMR needs both the
