@@ -134,38 +134,61 @@ def cycle_compute(robot: str, cycles: int = 100_000) -> dict:
             "speedup": med["baseline"] / med["compute"], "cycles": cycles}
 
 
-def simulation_speed(robot: str, seconds: float = 10.0, blocks: int = 20) -> dict:
+def simulation_speed(robot: str, seconds: float = 10.0,
+                     ideal_motors: bool = True) -> dict:
     """Real-time factor of the simulator with the controller in the loop, and
-    of raw pybullet stepping of the same generated robot in the same world,
-    in alternating blocks (``seconds`` of simulated time each way)."""
-    from holonomic_sim.sim_driver import SimDriver
+    of raw ``pybullet.stepSimulation`` for the very same run: every physics
+    step's ``stepSimulation`` call is timed on its own, so the raw figure is
+    what pybullet alone spends on this robot doing this motion (``seconds`` of
+    simulated time). ``ideal_motors``: pybullet's velocity motors
+    (``sim.ideal_motors``), else the drive model on every joint. Timed with
+    ``perf_counter`` around each call (``process_time`` is a system call of
+    several microseconds on a loaded machine, a cost of its own); being
+    descheduled by other load then lands on both sides in proportion."""
+    import pybullet as pb
 
-    cfg = load_config(robot, {"cmd_timeout": 0.0, "sim.physics_rate": 1000.0})
+    from holonomic_sim.sim_driver import SimDriver
+    from holonomic_sim.world import SimWorld
+
+    cfg = load_config(robot, {"cmd_timeout": 0.0, "sim.physics_rate": 1000.0,
+                              "sim.ideal_motors": ideal_motors})
     clock = ManualClock()
-    driver = SimDriver(cfg.model, cfg.values, cfg.controller.control_rate)
+    # a world of our own, stepped here (as the fleet runner does) so that the
+    # stepSimulation calls can be timed apart from the robot's per-step hooks
+    world = SimWorld(cfg.values["sim.physics_rate"])
+    driver = SimDriver(cfg.model, cfg.values, cfg.controller.control_rate, world=world)
     driver.configure()
+    world.settle()
     ctrl = BaseController(cfg, driver, clock=clock)
     ctrl.request_enable(True)
     ctrl.step()
-    cycles = max(1, int(seconds * cfg.controller.control_rate / blocks))
-    world = driver._world
+    (sim_robot,) = world.robots
     twist = (0.3, 0.2, 0.5)
-    spent = {"controller": 0.0, "raw": 0.0}
-    for _ in range(blocks):
-        t0 = time.perf_counter()
-        for _ in range(cycles):
-            ctrl.set_command(twist)
-            ctrl.step()
-            clock.now = ctrl.reading.stamp
-        spent["controller"] += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        world.step(cycles * driver.substeps)
-        spent["raw"] += time.perf_counter() - t0
+    cycles = max(1, int(seconds * cfg.controller.control_rate))
+    now, client = time.perf_counter, world.client
+    raw = 0.0
+    start = now()
+    for _ in range(cycles):
+        for _ in range(driver.substeps):         # SimWorld.step, its physics call timed
+            sim_robot.before_step()
+            t0 = now()
+            pb.stepSimulation(physicsClientId=client)
+            raw += now() - t0
+            world.steps += 1
+            sim_robot.after_step()
+        clock.now = world.time
+        ctrl.set_command(twist)
+        ctrl.step()
+    total = now() - start
+    fault = ctrl.fault
     driver.close()
-    simulated = blocks * cycles / cfg.controller.control_rate
-    with_controller, raw = simulated / spent["controller"], simulated / spent["raw"]
-    return {"robot": robot, "with_controller_x": with_controller, "raw_pybullet_x": raw,
-            "ratio": with_controller / raw}
+    world.close()
+    if fault:
+        raise RuntimeError(f"{robot}: the controller faulted during the benchmark: {fault}")
+    simulated = cycles / cfg.controller.control_rate
+    return {"robot": robot, "motors": "ideal" if ideal_motors else "drive model",
+            "with_controller_x": simulated / total, "raw_pybullet_x": simulated / raw,
+            "ratio": raw / total}
 
 
 def fleet_speed(robot: str, counts=(1, 2, 4, 6, 8, 12, 16), seconds: float = 3.0) -> dict:

@@ -203,3 +203,21 @@ def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             out[name] = value
     return out
+
+
+def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
+    """``["NAME:=VALUE", ...]`` (the command lines' ``-p``) to a flat dict,
+    each VALUE read as YAML (``true``, ``10``, ``[0, 1]``, text). Raises
+    ValueError on an item without ``:=``."""
+    import yaml
+
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition(":=")
+        if not sep or not name.strip():
+            raise ValueError(f"-p expects NAME:=VALUE, got {item!r}")
+        try:
+            out[name.strip()] = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"-p {name.strip()}: unreadable value {text!r}") from exc
+    return out

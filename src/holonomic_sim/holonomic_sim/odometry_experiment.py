@@ -13,10 +13,24 @@ This reproduces it with the real control stack (``BaseController`` and the
 * every joint reading is recorded once, and each estimator integrates the
   same recording -- the estimators are compared on identical motion;
 * the final error is ``|odometry - ground truth|`` at the end (position, m;
-  heading, rad), over ``--seeds`` seeds x the slip conditions.
+  heading, rad), over ``--seeds`` seeds x the conditions;
+* the internal force -- the part of the wheels' contact forces that produces
+  no net force or moment on the base (:mod:`holonomic_sim.contact_forces`),
+  the wheels fighting each other -- is sampled every control cycle (RMS).
+
+Conditions: the slip conditions on ideal motors (pybullet's velocity motors,
+the reference) and on the drive model (velocity loops with a per-joint spread
+of gains and friction, torque limits, rotor inertia, delays: the simulator's
+default). ``-p NAME:=VALUE`` changes the drive model (e.g. its bandwidth or
+spread) for a sweep.
 
 Prints a table (mean and median per estimator and condition, and the ratios
-to ``pinv``) and, with ``--json``, writes every trial.
+to ``pinv``) and, with ``--json``, writes every trial. With ``--calibrate``
+it also fits the odometry covariance to ground truth over the same runs
+(:mod:`holonomic_sim.odometry_calibration`); ``--check`` reports the coverage
+of the config's own covariance. :func:`simulate` is also the offline driver
+of the self-calibration experiment (a calibration overlay for the
+controller only, the simulator keeping its hidden geometry).
 """
 
 from __future__ import annotations
@@ -36,19 +50,31 @@ from holonomic_core.loop import ManualClock
 from holonomic_core.odometry import Odometry, wrap_angle
 from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
                                          robot_config)
-from holonomic_core.schema import ConfigError
+from holonomic_core.schema import ConfigError, parse_overrides
+from holonomic_sim.contact_forces import internal_force
 
-#: slip conditions: name -> simulator overrides (per-wheel friction spread is
-#: re-drawn from each trial's seed)
+_IDEAL = {"sim.ideal_motors": True}
+_DRIVES = {"sim.ideal_motors": False}
+#: conditions: name -> simulator overrides (per-wheel friction spread and the
+#: drives' per-joint spread are re-drawn from each trial's seed)
 CONDITIONS = {
-    "nominal (mu 1.0)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0},
-    "uneven (mu 0.8 +-40 %)": {"sim.wheel_friction": 0.8, "sim.friction_spread": 0.4},
-    "slippery (mu 0.3 +-30 %)": {"sim.wheel_friction": 0.3, "sim.friction_spread": 0.3},
+    "nominal (mu 1.0)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0, **_IDEAL},
+    "uneven (mu 0.8 +-40 %)": {"sim.wheel_friction": 0.8, "sim.friction_spread": 0.4,
+                               **_IDEAL},
+    "slippery (mu 0.3 +-30 %)": {"sim.wheel_friction": 0.3, "sim.friction_spread": 0.3,
+                                 **_IDEAL},
     "worn tyres (r +-2 %)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0,
-                             "sim.wheel_radius_spread": 0.02},
+                             "sim.wheel_radius_spread": 0.02, **_IDEAL},
+    "drives, nominal (mu 1.0)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0,
+                                 **_DRIVES},
+    "drives, uneven (mu 0.8 +-40 %)": {"sim.wheel_friction": 0.8, "sim.friction_spread": 0.4,
+                                       **_DRIVES},
 }
-#: short name on the command line (its first word) -> the condition's full name
-CONDITION_KEYS = {name.split()[0]: name for name in CONDITIONS}
+#: short name on the command line -> the condition's full name
+CONDITION_KEYS = {"nominal": "nominal (mu 1.0)", "uneven": "uneven (mu 0.8 +-40 %)",
+                  "slippery": "slippery (mu 0.3 +-30 %)", "worn": "worn tyres (r +-2 %)",
+                  "drives-nominal": "drives, nominal (mu 1.0)",
+                  "drives-uneven": "drives, uneven (mu 0.8 +-40 %)"}
 
 
 def condition_name(text: str) -> str:
@@ -70,6 +96,8 @@ class Trial:
     position_error: dict = field(default_factory=dict)   # estimator -> [m]
     heading_error: dict = field(default_factory=dict)    # estimator -> [rad]
     seconds: float = 0.0                 # [s] wall time of the simulation
+    internal_force_rms: float = 0.0      # [N] RMS of |f_int| over the run
+    fault: str | None = None             # the controller's fault, if it stopped the run
 
 
 @dataclass
@@ -79,7 +107,11 @@ class Recording:
     ``stamps`` (N,) [s]; ``positions`` (N, joints) [rad]; ``truth`` (N, 3)
     true pose (x, y, yaw) in odom [m, m, rad]; ``truth_twist`` (N, 3) true
     body twist in base_link [m/s, m/s, rad/s]; ``config`` the robot config
-    the run was driven with.
+    the controller ran (with a calibration overlay, if any); ``internal_force``
+    (N,) [N] the magnitude of the wheels' internal force
+    (:mod:`holonomic_sim.contact_forces`); ``fault`` the controller's fault if
+    it stopped the run; ``hidden_truth`` the simulator's hidden geometry
+    (``SimDriver.hidden_truth``).
     """
 
     robot: str
@@ -91,6 +123,9 @@ class Recording:
     truth: np.ndarray
     truth_twist: np.ndarray
     seconds: float = 0.0
+    internal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    fault: str | None = None
+    hidden_truth: dict = field(default_factory=dict)
 
 
 def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, float, float]:
@@ -104,21 +139,28 @@ def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, flo
     return (c * vx_w + s * vy_w, -s * vx_w + c * vy_w, wz)
 
 
-def record_run(robot: str, condition: str, seed: int, duration: float = 60.0,
-               area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0) -> Recording:
-    """One random run and return, recorded (see the module docstring)."""
-    overrides = dict(CONDITIONS[condition])
-    overrides.update({"sim.seed": seed, "cmd_timeout": 0.0, "enable_on_start": True})
+def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
+             speed: float = 1.25, acceleration: float = 2.0, overrides: dict | None = None,
+             calibration: dict | None = None, condition: str = "") -> Recording:
+    """Random moves inside ``area`` [m] for ``duration`` [s] (targets drawn
+    from ``seed``), then back to the start, recorded (see the module
+    docstring). ``overrides``: config keys for the controller and the
+    simulated robot (a slip condition, simulator faults, the drive model);
+    ``calibration``: config keys for the controller only (a calibration
+    overlay), so the simulated robot keeps its geometry and faults."""
+    merged = {"sim.seed": seed, "cmd_timeout": 0.0, "enable_on_start": True}
     for axis in ("x", "y"):
-        overrides[f"limits.linear.{axis}.max_velocity"] = speed
-        overrides[f"limits.linear.{axis}.max_acceleration"] = acceleration
-        overrides[f"limits.linear.{axis}.max_deceleration"] = acceleration
-    cfg = load_config(robot, overrides)
+        merged[f"limits.linear.{axis}.max_velocity"] = speed
+        merged[f"limits.linear.{axis}.max_acceleration"] = acceleration
+        merged[f"limits.linear.{axis}.max_deceleration"] = acceleration
+    merged.update(overrides or {})
+    cfg = load_config(robot, {**merged, **(calibration or {})})
+    physical = load_config(robot, merged).model if calibration else cfg.model
     clock = ManualClock()
-    driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
+    driver = cfg.driver_class(physical, cfg.values, cfg.controller.control_rate)
     rng = np.random.default_rng(seed)
     wz_max = min(1.5, cfg.controller.max_velocity[2])
-    stamps, readings, truths, twists = [], [], [], []
+    stamps, readings, truths, twists, internal = [], [], [], [], []
     t_wall = time.perf_counter()
     with driver:
         ctrl = BaseController(cfg, driver, clock=clock)
@@ -132,6 +174,8 @@ def record_run(robot: str, condition: str, seed: int, duration: float = 60.0,
             truth = driver.ground_truth()
             truths.append(truth.pose.copy())
             twists.append(truth.twist.copy())
+            positions, forces = driver.wheel_contacts()
+            internal.append(float(np.linalg.norm(internal_force(positions, forces))))
 
         step()
         half = np.array(area) / 2.0
@@ -156,8 +200,22 @@ def record_run(robot: str, condition: str, seed: int, duration: float = 60.0,
         ctrl.set_command((0.0, 0.0, 0.0))
         for _ in range(int(0.5 * cfg.controller.control_rate)):
             step()
+        fault = ctrl.fault
+        hidden = dict(driver.hidden_truth)
     return Recording(robot, condition, seed, cfg, np.array(stamps), np.array(readings),
-                     np.array(truths), np.array(twists), time.perf_counter() - t_wall)
+                     np.array(truths), np.array(twists), seconds=time.perf_counter() - t_wall,
+                     internal_force=np.array(internal),
+                     fault=None if fault is None else str(fault), hidden_truth=hidden)
+
+
+def record_run(robot: str, condition: str, seed: int, duration: float = 60.0,
+               area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0,
+               overrides: dict | None = None, calibration: dict | None = None) -> Recording:
+    """One random run and return under a slip ``condition`` (a key of
+    CONDITIONS), recorded; ``overrides`` / ``calibration`` as in
+    :func:`simulate`, applied over the condition's settings."""
+    return simulate(robot, seed, duration, area, speed, acceleration,
+                    {**CONDITIONS[condition], **(overrides or {})}, calibration, condition)
 
 
 def final_errors(rec: Recording) -> Trial:
@@ -166,7 +224,10 @@ def final_errors(rec: Recording) -> Trial:
     cfg = rec.config
     trial = Trial(rec.robot, rec.condition, rec.seed,
                   float(np.sum(np.linalg.norm(np.diff(path[:, :2], axis=0), axis=1))),
-                  seconds=rec.seconds)
+                  seconds=rec.seconds,
+                  internal_force_rms=float(np.sqrt(np.mean(np.square(rec.internal_force))))
+                  if rec.internal_force.size else 0.0,
+                  fault=rec.fault)
     for estimator in ESTIMATORS:
         odo = Odometry(cfg.model, estimator, cfg.controller.noise, cfg.controller.twist_window)
         for stamp, positions in zip(rec.stamps.tolist(), rec.positions):
@@ -186,7 +247,7 @@ def summarize(trials: list[Trial]) -> str:
     """The table: per condition and estimator, mean/median errors, ratios to
     pinv and in how many runs the estimator ended closer than pinv."""
     lines = []
-    head = (f"{'condition':26s} {'estimator':9s} {'mean err':>9s} {'median':>8s} "
+    head = (f"{'condition':30s} {'estimator':9s} {'mean err':>9s} {'median':>8s} "
             f"{'mean hdg':>9s} {'mean/pinv':>9s} {'median/pinv':>11s} {'< pinv':>7s}")
     lines += [head, "-" * len(head)]
     for condition in dict.fromkeys(t.condition for t in trials):
@@ -196,12 +257,17 @@ def summarize(trials: list[Trial]) -> str:
         for e in ESTIMATORS:
             mean, median = pos[e].mean(), np.median(pos[e])
             lines.append(
-                f"{condition:26s} {e:9s} {mean * 1000:7.1f}mm {median * 1000:6.1f}mm "
+                f"{condition:30s} {e:9s} {mean * 1000:7.1f}mm {median * 1000:6.1f}mm "
                 f"{math.degrees(hdg[e].mean()):7.2f}deg {mean / pos['pinv'].mean():9.2f} "
                 f"{median / np.median(pos['pinv']):11.2f} "
                 f"{'' if e == 'pinv' else str(int(np.sum(pos[e] < pos['pinv']))):>7s}")
         dist = np.mean([t.distance for t in group])
-        lines.append(f"{'':26s} ({len(group)} runs, mean true path {dist:.1f} m)")
+        force = np.mean([t.internal_force_rms for t in group])
+        faults = sum(t.fault is not None for t in group)
+        lines.append(f"{'':30s} ({len(group)} runs, mean true path {dist:.1f} m, "
+                     f"internal force RMS {force:.1f} N"
+                     + (f"; the controller faulted in {faults}: see --json" if faults else "")
+                     + ")")
     return "\n".join(lines)
 
 
@@ -223,6 +289,9 @@ def main(argv: list[str] | None = None) -> int:
                         metavar="|".join(CONDITION_KEYS),
                         help="slip condition(s), repeatable (default: all): "
                              + "; ".join(f"{k} = {v}" for k, v in CONDITION_KEYS.items()))
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override a parameter in the drive-model conditions, "
+                             "e.g. -p sim.drive.spread:=0.3")
     parser.add_argument("--json", type=output_file, metavar="FILE",
                         help="write every trial to FILE")
     parser.add_argument("--calibrate", action="store_true",
@@ -233,12 +302,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plot", type=output_file, metavar="PNG",
                         help="with --calibrate/--check: error against sigma, written to PNG")
     args = parser.parse_args(argv)
+    try:
+        drive_overrides = parse_overrides(args.param)
+    except ValueError as exc:
+        parser.error(str(exc))
     trials, recordings = [], []
     for condition in args.condition or list(CONDITIONS):
         for seed in range(args.seeds):
             try:
+                drives = not CONDITIONS[condition]["sim.ideal_motors"]
                 rec = record_run(args.robot, condition, seed, args.duration,
-                                 speed=args.speed, acceleration=args.acceleration)
+                                 speed=args.speed, acceleration=args.acceleration,
+                                 overrides=drive_overrides if drives else None)
             except ConfigError as exc:      # e.g. per-wheel radii on a DDROT
                 print(f"{condition}: skipped for {args.robot} ({exc})", file=sys.stderr)
                 break
@@ -247,8 +322,9 @@ def main(argv: list[str] | None = None) -> int:
             if args.calibrate or args.check:
                 recordings.append(rec)
             errs = "  ".join(f"{e} {trial.position_error[e] * 1000:6.1f}mm" for e in ESTIMATORS)
-            print(f"{condition:26s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
-                  f"({trial.seconds:.1f} s)", file=sys.stderr, flush=True)
+            print(f"{condition:30s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
+                  f"({trial.seconds:.1f} s){'  FAULT: ' + trial.fault if trial.fault else ''}",
+                  file=sys.stderr, flush=True)
     print(summarize(trials))
     if args.json:
         with open(args.json, "w") as handle:

@@ -11,9 +11,17 @@ second is measured:
 * slip: the contact slip the encoders see (the slip_min fit residual, per
   caster, mean and max) -- what a distribution that fights itself produces;
 * peak traction: the largest friction force of any wheel on the floor
-  (pybullet's contact points), i.e. how close to losing grip the base runs.
+  (pybullet's contact points), i.e. how close to losing grip the base runs;
+* a controller fault (e.g. the reading monitor's tracking check on a wheel
+  that spins) ends the run; the row says when and why;
+* internal force: the part of the wheels' contact forces that produces no
+  net force or moment on the base (:mod:`holonomic_sim.contact_forces`:
+  ``|(I - W^+ W) f|``), RMS and max -- wheels pushing against each other.
 
-Prints a table (and writes it with ``--markdown FILE``).
+Each mode runs on both motor models: the drive model (the simulator's
+default: velocity loops, torque limits, rotor inertia, friction, delays) and
+ideal motors (``sim.ideal_motors``, the reference). Prints a table (and writes
+it with ``--markdown FILE``).
 """
 
 from __future__ import annotations
@@ -22,13 +30,14 @@ import math
 import sys
 
 import numpy as np
-import pybullet as pb
 
 from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
                                          robot_config)
 from holonomic_core.controller import BaseController, load_config
 from holonomic_core.loop import ManualClock
 from holonomic_core.odometry import wrap_angle
+from holonomic_core.schema import parse_overrides
+from holonomic_sim.contact_forces import internal_force
 
 
 #: [s] both trajectories start from rest and reach their pace over this time
@@ -121,24 +130,33 @@ MODES = {  # name -> config overrides
 }
 
 
-def _traction(driver) -> float:
-    """Largest friction force [N] of any wheel on the floor now."""
-    robot, world = driver._robot, driver._world
-    best = 0.0
-    for c in pb.getContactPoints(bodyA=robot.body, bodyB=world.floor,
-                                 physicsClientId=world.client):
-        best = max(best, math.hypot(c[10], c[12]))
-    return best
+#: motor models: name -> simulator overrides
+MOTORS = {"drive model": {"sim.ideal_motors": False}, "ideal": {"sim.ideal_motors": True}}
 
 
-def run(robot: str, trajectory: str, mode: str, friction: float = 1.0) -> dict:
+def _contact_figures(driver) -> tuple[float, float]:
+    """Largest friction force of any wheel on the floor [N] and the size of
+    the internal force |f_int| [N], now."""
+    positions, forces = driver.wheel_contacts()
+    if len(forces) == 0:
+        return 0.0, 0.0
+    return (float(np.max(np.linalg.norm(forces, axis=1))),
+            float(np.linalg.norm(internal_force(positions, forces))))
+
+
+def run(robot: str, trajectory: str, mode: str, friction: float = 1.0,
+        motors: str = "drive model", overrides: dict | None = None) -> dict:
+    """One run: ``trajectory`` in ``mode`` on ``motors`` (keys of
+    :data:`TRAJECTORIES`, :data:`MODES`, :data:`MOTORS`); ``overrides``: more
+    parameters (e.g. ``sim.drive.bandwidth``)."""
     sample, duration = TRAJECTORIES[trajectory]()
-    overrides = {**MODES[mode], "cmd_timeout": 0.0, "sim.wheel_friction": friction,
-                 "enable_on_start": True}
-    cfg = load_config(robot, overrides)
+    settings = {**MODES[mode], **MOTORS[motors], "cmd_timeout": 0.0,
+                "sim.wheel_friction": friction, "enable_on_start": True, **(overrides or {})}
+    cfg = load_config(robot, settings)
     clock = ManualClock()
     driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
-    errors, headings, slip, traction = [], [], [], []
+    errors, headings, slip, traction, internal = [], [], [], [], []
+    fault = None
     with driver:
         ctrl = BaseController(cfg, driver, clock=clock)
         if mode.endswith("pinv(C)^T"):
@@ -151,9 +169,10 @@ def run(robot: str, trajectory: str, mode: str, friction: float = 1.0) -> dict:
         while clock.now - start < duration:
             ctrl.step()
             clock.now = ctrl.reading.stamp
-            if ctrl.fault is not None:
-                raise RuntimeError(f"{mode} on {trajectory}: controller fault: {ctrl.fault}")
             t = clock.now - start
+            if ctrl.fault is not None:            # the run ends here; the row says so
+                fault = f"fault at {t:.1f} s: {ctrl.fault}"
+                break
             if t < duration / 2:
                 continue                      # the first lap settles the start
             ref = sample(t)
@@ -163,25 +182,38 @@ def run(robot: str, trajectory: str, mode: str, friction: float = 1.0) -> dict:
             errors.append(math.hypot(truth[0] - ref[0][0], truth[1] - ref[0][1]))
             headings.append(abs(wrap_angle(truth[2] - ref[0][2])))
             slip.append(ctrl.odometry.residual.copy())
-            traction.append(_traction(driver))
+            peak, inner = _contact_figures(driver)
+            traction.append(peak)
+            internal.append(inner)
+    if not errors:
+        return {"trajectory": trajectory, "mode": mode, "motors": motors, "fault": fault}
     slip = np.array(slip)
-    return {"trajectory": trajectory, "mode": mode,
+    return {"trajectory": trajectory, "mode": mode, "motors": motors, "fault": fault,
             "rms_mm": 1e3 * float(np.sqrt(np.mean(np.square(errors)))),
             "max_mm": 1e3 * float(np.max(errors)),
             "max_heading_deg": math.degrees(float(np.max(headings))),
             "slip_mean_mm_s": 1e3 * float(slip.mean()), "slip_max_mm_s": 1e3 * float(slip.max()),
-            "peak_traction_n": float(np.max(traction))}
+            "peak_traction_n": float(np.max(traction)),
+            "internal_rms_n": float(np.sqrt(np.mean(np.square(internal)))),
+            "internal_max_n": float(np.max(internal))}
 
 
 def table(rows) -> str:
-    head = ("| trajectory | mode | position RMS | max | heading max | slip mean | slip max "
-            "| peak traction |")
-    out = [head, "|---|---|---|---|---|---|---|---|"]
+    head = ("| trajectory | motors | mode | position RMS | max | heading max | slip mean "
+            "| slip max | peak traction | internal force RMS | max |")
+    out = [head, "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        out.append(f"| {r['trajectory']} | {r['mode']} | {r['rms_mm']:.1f} mm | "
+        if "rms_mm" not in r:                     # faulted before the measured lap
+            out.append(f"| {r['trajectory']} | {r['motors']} | {r['mode']} | "
+                       f"{r['fault']} |" + " |" * 9)
+            continue
+        mode = r["mode"] + (f" ({r['fault']}; the rest of the lap not measured)"
+                            if r["fault"] else "")
+        out.append(f"| {r['trajectory']} | {r['motors']} | {mode} | {r['rms_mm']:.1f} mm | "
                    f"{r['max_mm']:.1f} mm | {r['max_heading_deg']:.2f} deg | "
                    f"{r['slip_mean_mm_s']:.2f} mm/s | {r['slip_max_mm_s']:.1f} mm/s | "
-                   f"{r['peak_traction_n']:.0f} N |")
+                   f"{r['peak_traction_n']:.0f} N | {r['internal_rms_n']:.1f} N | "
+                   f"{r['internal_max_n']:.1f} N |")
     return "\n".join(out)
 
 
@@ -192,6 +224,10 @@ def main(argv=None) -> int:
                         help="a PCV config name or YAML")
     parser.add_argument("--friction", type=number(0.0, 10.0, strict_low=True), default=1.0,
                         help="wheel friction coefficient")
+    parser.add_argument("--motors", action="append", choices=list(MOTORS),
+                        help="motor model(s) (default: both)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override a parameter, e.g. -p sim.drive.bandwidth:=10")
     parser.add_argument("--markdown", type=output_file, metavar="FILE",
                         help="also write the table to FILE")
     args = parser.parse_args(argv)
@@ -199,11 +235,17 @@ def main(argv=None) -> int:
     if kind != "pcv":
         parser.error(f"--robot: {args.robot} is a {kind}; the experiment needs a "
                      "powered-caster vehicle (pcv), e.g. xr4000 or comr3")
+    try:
+        overrides = parse_overrides(args.param)
+    except ValueError as exc:
+        parser.error(str(exc))
     rows = []
     for trajectory in TRAJECTORIES:
-        for mode in MODES:
-            rows.append(run(args.robot, trajectory, mode, args.friction))
-            print(f"{trajectory:13s} {mode:17s} done", file=sys.stderr, flush=True)
+        for motors in args.motors or list(MOTORS):
+            for mode in MODES:
+                rows.append(run(args.robot, trajectory, mode, args.friction, motors, overrides))
+                print(f"{trajectory:13s} {motors:12s} {mode:17s} done", file=sys.stderr,
+                      flush=True)
     text = table(rows)
     print(text)
     if args.markdown:

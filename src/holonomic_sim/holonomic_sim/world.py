@@ -20,6 +20,10 @@ from holonomic_core.link_transforms import rotate
 from holonomic_sim.urdf import frictionless_links, generate_urdf
 
 
+#: [m] how high a lifted base (a bench test) is held above its resting height
+_LIFT = 0.1
+
+
 class SimError(RuntimeError):
     """The physics server could not be started or a robot not loaded."""
 
@@ -51,16 +55,31 @@ class Pose2D:
 class SimRobot:
     """One robot in a :class:`SimWorld`: joint motors, encoders, ground truth.
 
-    Joint arrays are in ``model.joint_names`` order. Motor model: each joint is
-    a velocity-controlled motor that reaches its target speed with at most its
-    ``max_effort`` torque (and never commands more than ``max_velocity``), or,
-    in torque mode, applies a torque clipped to ``max_effort``.
+    Joint arrays are in ``model.joint_names`` order. Two motor models:
+
+    * with a :class:`~holonomic_sim.drive_model.DriveSpec` (``drive``): every
+      joint is driven by a :class:`~holonomic_sim.drive_model.DriveBank`
+      (velocity loop, torque limit, delays, encoder, friction) whose torques
+      are applied with ``TORQUE_CONTROL`` each physics step; the rotor's
+      reflected inertia is added to the joint's child link and Coulomb
+      friction is pybullet's joint motor with zero target speed and the
+      friction torque as its force (an implicit constraint: it holds a joint
+      at rest below the breakaway torque without chattering);
+    * without (ideal motors): each joint is pybullet's velocity motor, which
+      reaches its target speed within a step with at most its ``max_effort``
+      torque (never commanding more than ``max_velocity``), or, in torque
+      mode, applies a torque clipped to ``max_effort``.
+
+    ``lifted``: the base is held in the air, wheels off the floor (a bench test).
     """
 
-    def __init__(self, world: "SimWorld", model, start: Pose2D, friction: np.ndarray):
+    def __init__(self, world: "SimWorld", model, start: Pose2D, friction: np.ndarray,
+                 drive=None, drive_rng: np.random.Generator | None = None,
+                 lifted: bool = False):
         self.world = world
         self.model = model
         self.start = start
+        self.lifted = lifted
         cid = world.client
         urdf = generate_urdf(model)
         with tempfile.TemporaryDirectory(prefix="holonomic_sim_") as tmp:
@@ -70,10 +89,10 @@ class SimRobot:
             try:
                 # loadURDF places the root link's URDF origin (on the floor)
                 self.body = pb.loadURDF(
-                    path, [start.x, start.y, 0.0],
+                    path, [start.x, start.y, _LIFT if lifted else 0.0],
                     pb.getQuaternionFromEuler([0.0, 0.0, start.yaw]),
                     flags=pb.URDF_USE_IMPLICIT_CYLINDER | pb.URDF_USE_INERTIA_FROM_FILE,
-                    physicsClientId=cid)
+                    useFixedBase=lifted, physicsClientId=cid)
             except pb.error as exc:
                 raise SimError(f"pybullet could not load the generated URDF: {exc}") from exc
         # pybullet's base pose is the root's inertial frame (the body above
@@ -107,13 +126,66 @@ class SimRobot:
                               rollingFriction=0.0, spinningFriction=0.0, physicsClientId=cid)
         self._torque_mode = False
         self._efforts = np.zeros(len(self.joint_indices))
+        #: the drives (None: ideal motors)
+        self.drives = None
+        if drive is not None:
+            self._attach_drives(drive, drive_rng or np.random.default_rng(0))
         self.hold()
+
+    def _attach_drives(self, spec, rng: np.random.Generator) -> None:
+        from holonomic_sim.drive_model import DriveBank
+
+        cid = self.world.client
+        # the rotor spins N times faster than the joint: N^2 J_rotor about the
+        # joint axis, added to the child link's inertia (the link's inertial
+        # frames are unrotated, so the axis is a principal axis) as a thin
+        # disc's (half of it about the two other axes), which keeps the
+        # tensor physical (Bullet checks Ixx + Iyy >= Izz)
+        for joint, extra in zip(self.joint_indices, spec.reflected_inertia.tolist()):
+            axis = np.abs(np.array(pb.getJointInfo(self.body, joint, physicsClientId=cid)[13]))
+            diagonal = np.array(pb.getDynamicsInfo(self.body, joint, physicsClientId=cid)[2])
+            disc = extra * (1.0 + axis ** 2) / 2.0
+            pb.changeDynamics(self.body, joint, localInertiaDiagonal=(diagonal + disc).tolist(),
+                              physicsClientId=cid)
+        self.drives = DriveBank(spec, self._locked_inertia(), self.world.dt, rng)
+        self._coulomb = self.drives.coulomb.tolist()
+        self._set_joint_friction(self._coulomb)
+        self._braked = False
+        self._record_drive_states()
+
+    def _set_joint_friction(self, torques: list[float]) -> None:
+        """pybullet's joint motor at zero speed with ``torques`` [N m] as its
+        force: Coulomb friction, or a holding brake."""
+        pb.setJointMotorControlArray(self.body, self.joint_indices, pb.VELOCITY_CONTROL,
+                                     targetVelocities=[0.0] * len(torques), forces=torques,
+                                     physicsClientId=self.world.client)
+
+    def _release_brakes(self) -> None:
+        if self._braked:
+            self._set_joint_friction(self._coulomb)
+            self._braked = False
+
+    def _locked_inertia(self) -> np.ndarray:
+        """Each joint's inertia [kg m^2] with the base and the other joints
+        held: the diagonal of the joint-space mass matrix at the current pose."""
+        cid = self.world.client
+        movable = [j for j in range(pb.getNumJoints(self.body, physicsClientId=cid))
+                   if pb.getJointInfo(self.body, j, physicsClientId=cid)[2] != pb.JOINT_FIXED]
+        q = [s[0] for s in pb.getJointStates(self.body, movable, physicsClientId=cid)]
+        mass = np.array(pb.calculateMassMatrix(self.body, q, physicsClientId=cid))
+        offset = mass.shape[0] - len(movable)          # 6 base rows when floating
+        return np.array([mass[offset + movable.index(j), offset + movable.index(j)]
+                         for j in self.joint_indices])
 
     # -- motors -----------------------------------------------------------------
     def command_velocities(self, velocities: np.ndarray) -> None:
         """Target joint speeds [rad/s], clipped to the speed limits."""
         target = [min(v, m) if v > -m else -m
                   for v, m in zip(np.asarray(velocities, float).tolist(), self._vmax)]
+        if self.drives is not None:
+            self._release_brakes()
+            self.drives.command_velocities(target)
+            return
         self._torque_mode = False
         pb.setJointMotorControlArray(self.body, self.joint_indices, pb.VELOCITY_CONTROL,
                                      targetVelocities=target, forces=self._forces,
@@ -121,6 +193,10 @@ class SimRobot:
 
     def command_efforts(self, efforts: np.ndarray) -> None:
         """Joint torques [N m], clipped to the torque limits; applied every step."""
+        if self.drives is not None:
+            self._release_brakes()
+            self.drives.command_efforts(efforts)
+            return
         if not self._torque_mode:
             # pybullet's velocity motors must be released before torque control.
             pb.setJointMotorControlArray(self.body, self.joint_indices, pb.VELOCITY_CONTROL,
@@ -130,19 +206,46 @@ class SimRobot:
         self._efforts = np.clip(np.asarray(efforts, float), -self.max_effort, self.max_effort)
 
     def hold(self) -> None:
-        """Brake every joint: zero speed with full torque (a drive holding still)."""
+        """Brake every joint: zero speed with full torque (a drive holding still),
+        at once (no command delay). With the drive model: the drives' speed
+        loops reset to zero and each joint's holding brake engaged (a brake
+        torque of max_effort) until the next command."""
+        if self.drives is not None:
+            self.drives.hold()
+            self._set_joint_friction(self._forces)
+            self._braked = True
+            return
         self.command_velocities(np.zeros(len(self.joint_indices)))
 
     def before_step(self) -> None:
         # TORQUE_CONTROL forces last one simulation step in pybullet.
-        if self._torque_mode:
+        if self.drives is not None:
+            pb.setJointMotorControlArray(self.body, self.joint_indices, pb.TORQUE_CONTROL,
+                                         forces=self.drives.torques(self._drive_velocities),
+                                         physicsClientId=self.world.client)
+        elif self._torque_mode:
             pb.setJointMotorControlArray(self.body, self.joint_indices, pb.TORQUE_CONTROL,
                                          forces=self._efforts.tolist(),
                                          physicsClientId=self.world.client)
 
+    def after_step(self) -> None:
+        if self.drives is not None:
+            self._record_drive_states()
+
+    def _record_drive_states(self) -> None:
+        states = pb.getJointStates(self.body, self.joint_indices,
+                                   physicsClientId=self.world.client)
+        self._drive_velocities = [state[1] for state in states]
+        self.drives.record([state[0] for state in states], self._drive_velocities)
+
     # -- sensors ----------------------------------------------------------------
     def joint_states(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Positions [rad], velocities [rad/s] and motor torques [N m]."""
+        """Positions [rad], velocities [rad/s] and motor torques [N m] as the
+        drives report them (with the drive model: delayed, positions in whole
+        encoder counts)."""
+        if self.drives is not None:
+            positions, velocities = self.drives.feedback()
+            return positions, velocities, self.drives.torque.copy()
         states = pb.getJointStates(self.body, self.joint_indices,
                                    physicsClientId=self.world.client)
         columns = list(zip(*states))
@@ -154,6 +257,23 @@ class SimRobot:
     def _com_offset(self, orientation) -> tuple[float, float, float]:
         """World-frame vector [m] from base_link's origin to its inertial origin."""
         return rotate(orientation, self._com_in_link)
+
+    def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray]:
+        """The floor's contacts on this robot now: positions (n x 2) [m] and
+        planar friction forces (n x 2) [N], both in base_link (x, y); one row
+        per contact point pybullet reports (normally one per wheel)."""
+        cid = self.world.client
+        x, y, yaw = self.world_pose()
+        c, s = math.cos(yaw), math.sin(yaw)
+        positions, forces = [], []
+        for point in pb.getContactPoints(bodyA=self.body, bodyB=self.world.floor,
+                                         physicsClientId=cid):
+            px, py = point[5][0] - x, point[5][1] - y
+            fx = point[10] * point[11][0] + point[12] * point[13][0]
+            fy = point[10] * point[11][1] + point[12] * point[13][1]
+            positions.append((c * px + s * py, -s * px + c * py))
+            forces.append((c * fx + s * fy, -s * fx + c * fy))
+        return np.array(positions).reshape(-1, 2), np.array(forces).reshape(-1, 2)
 
     def world_pose(self) -> tuple[float, float, float]:
         """base_link's planar pose in the world [m, m, rad] (its URDF origin,
@@ -214,12 +334,17 @@ class SimWorld:
         """Simulated time [s] since the world was created."""
         return self.steps * self.dt
 
-    def add_robot(self, model, start: Pose2D = Pose2D(), friction=None) -> SimRobot:
+    def add_robot(self, model, start: Pose2D = Pose2D(), friction=None, drive=None,
+                  drive_rng: np.random.Generator | None = None, lifted: bool = False
+                  ) -> SimRobot:
         """Load ``model`` at ``start`` (world frame); ``friction``: one Coulomb
-        coefficient per wheel (default 1.0). The robot starts braked."""
+        coefficient per wheel (default 1.0); ``drive``: a
+        :class:`~holonomic_sim.drive_model.DriveSpec` (default: ideal motors),
+        its per-joint spread drawn from ``drive_rng``; ``lifted``: base held
+        in the air. The robot starts braked."""
         n_wheels = sum(name.endswith("wheel_joint") for name in model.joint_names)
         mu = np.ones(n_wheels) if friction is None else np.asarray(friction, float)
-        robot = SimRobot(self, model, start, mu)
+        robot = SimRobot(self, model, start, mu, drive, drive_rng, lifted)
         self.robots.append(robot)
         return robot
 
@@ -240,6 +365,8 @@ class SimWorld:
                 robot.before_step()
             pb.stepSimulation(physicsClientId=self.client)
             self.steps += 1
+            for robot in self.robots:
+                robot.after_step()
 
     def close(self) -> None:
         if self.client >= 0:

@@ -1,0 +1,191 @@
+"""``holonomic-drive-test ROBOT --joint NAME``: a velocity step on one joint.
+
+The other joints are held at zero speed; the joint's measured speed is
+recorded and its step response printed: rise time (10-90 %), overshoot,
+settling time (2 %) and steady-state error (``--json``: one object with
+``rise_time_s``, ``overshoot``, ``settling_time_s``, ``steady_state_error``
+and the context). No ROS: the program owns the driver for the test.
+
+* ``--driver sim`` (default): the simulator holds the base in the air
+  (``sim.lifted``) and is sampled at its physics rate (1 ms), so a loop of
+  tens of Hz is resolved; ``-p sim.drive.bandwidth:=60`` etc. try other drives.
+* ``--driver odrive_can`` / ``cia402``: the real drives. The wheels must be
+  off the floor: the program says so and waits for the user to type ``yes``
+  at a terminal; without a terminal, or without ``yes``, it exits 2 and
+  nothing moves. Sampled at the robot's control rate (the drives' feedback
+  rate limits what can be resolved).
+
+Fit ``sim.drive.*`` to a real drive by running both and matching the figures
+(docs/drive_model.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+
+import numpy as np
+
+#: [s] held at zero before the step (the drives settle) and after it
+_HOLD = 0.3
+#: drives whose motors are real: the user must confirm before anything moves
+_REAL = ("odrive_can", "cia402")
+
+
+def _error(message: str) -> int:
+    print(f"holonomic-drive-test: {message}", file=sys.stderr)
+    return 2
+
+
+def parse_args(argv):
+    from holonomic_core.driver import DRIVER_REGISTRY
+
+    parser = argparse.ArgumentParser(
+        prog="holonomic-drive-test",
+        description="Velocity step on one joint (the others held); prints rise time, "
+                    "overshoot, settling time and steady-state error.")
+    parser.add_argument("robot", help="a config name from config/ or a robot YAML")
+    parser.add_argument("--joint", required=True, help="the joint to step (a joint name)")
+    parser.add_argument("--driver", choices=sorted(DRIVER_REGISTRY),
+                        help="driver backend (default: the config's, normally sim)")
+    parser.add_argument("--amplitude", type=float, metavar="RAD_S",
+                        help="step size [rad/s] (default: a quarter of the joint's max_velocity)")
+    parser.add_argument("--duration", type=float, default=1.0, metavar="S",
+                        help="how long the step is held [s] (default 1.0)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override one parameter, e.g. -p sim.ideal_motors:=true")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    return parser.parse_args(argv)
+
+
+def _confirm(joint: str, amplitude: float, duration: float) -> bool:
+    print(f"holonomic-drive-test: LIFT THE ROBOT so that no wheel touches the floor. "
+          f"{joint} will turn at {amplitude:g} rad/s for {duration:g} s, the other joints "
+          f"are held at zero speed.", file=sys.stderr)
+    if not sys.stdin.isatty():
+        return False
+    print("Type 'yes' to start: ", end="", file=sys.stderr, flush=True)
+    try:
+        return sys.stdin.readline().strip().lower() == "yes"
+    except (OSError, KeyboardInterrupt):
+        return False
+
+
+def run_step(driver, index: int, amplitude: float, duration: float, rate: float,
+             paced: bool):
+    """Hold, step joint ``index`` to ``amplitude`` [rad/s] for ``duration``
+    [s], hold again; returns (times [s], speeds [rad/s], efforts [N m], the
+    step's time [s]). ``paced``: sleep to the ``rate`` [Hz] deadlines (real
+    drives); else as fast as the driver's ``read`` returns (simulator)."""
+    n = len(driver.model.joint_names)
+    zero = np.zeros(n)
+    step = zero.copy()
+    step[index] = amplitude
+    period = 1.0 / rate
+    times, speeds, efforts = [], [], []
+    t_step = None
+    deadline = time.monotonic()
+    cycles_hold, cycles_step = int(round(_HOLD * rate)), int(round(duration * rate))
+    for k in range(cycles_hold + cycles_step + cycles_hold):
+        if paced:
+            deadline += period
+            time.sleep(max(0.0, deadline - time.monotonic()))
+        reading = driver.read()
+        if cycles_hold <= k < cycles_hold + cycles_step:
+            if t_step is None:
+                t_step = reading.stamp
+            times.append(reading.stamp)
+            speeds.append(reading.velocities[index])
+            efforts.append(reading.efforts[index])
+        driver.write_velocities(step if cycles_hold <= k < cycles_hold + cycles_step - 1
+                                else zero)
+    return np.array(times), np.array(speeds), np.array(efforts), t_step
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    from holonomic_core.controller import load_config
+    from holonomic_core.driver import DriverError
+    from holonomic_core.schema import ConfigError, parse_overrides
+    from holonomic_core.step_response import step_response
+
+    try:
+        overrides = parse_overrides(args.param)
+        if args.driver:
+            overrides["driver"] = args.driver
+        cfg = load_config(args.robot, overrides)
+    except (ConfigError, ValueError, OSError) as exc:
+        return _error(str(exc))
+    model = cfg.model
+    if args.joint not in model.joint_names:
+        return _error(f"no joint {args.joint!r} on {model.name}: one of "
+                      f"{', '.join(model.joint_names)}")
+    index = model.joint_names.index(args.joint)
+    vmax = float(model.max_joint_velocity[index])
+    amplitude = 0.25 * vmax if args.amplitude is None else args.amplitude
+    if not (math.isfinite(amplitude) and 0.0 < abs(amplitude) <= vmax):
+        return _error(f"--amplitude must be non-zero and within the joint's max_velocity "
+                      f"(|a| <= {vmax:g} rad/s), got {amplitude:g}")
+    if not (math.isfinite(args.duration) and 0.05 <= args.duration <= 30.0):
+        return _error(f"--duration must be in [0.05, 30] s, got {args.duration:g}")
+    driver_name = cfg.controller.driver
+    simulated = driver_name == "sim"
+    if simulated:
+        # the bench test of a real robot: wheels in the air; sampled at the
+        # physics rate so that the loop's milliseconds are resolved
+        rate = float(cfg.values["sim.physics_rate"])
+        try:
+            cfg = load_config(args.robot, {**overrides, "sim.lifted": True,
+                                           "control_rate": rate})
+        except ConfigError as exc:
+            return _error(str(exc))
+    else:
+        rate = cfg.controller.control_rate
+        if driver_name in _REAL and not _confirm(args.joint, amplitude, args.duration):
+            return _error("not confirmed (type 'yes' at a terminal): nothing moved")
+    driver = cfg.driver_class(model, cfg.values, rate)
+    try:
+        with driver:
+            driver.activate()
+            t, y, effort, t_step = run_step(driver, index, amplitude, args.duration, rate,
+                                            paced=not simulated)
+    except DriverError as exc:
+        print(f"holonomic-drive-test: driver failure: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("holonomic-drive-test: interrupted: motors stopped", file=sys.stderr)
+        return 130
+    try:
+        # the first sample is the reading before the step was written
+        result = step_response(t, y, amplitude, t_step)
+    except ValueError as exc:
+        print(f"holonomic-drive-test: {args.joint}: {exc}", file=sys.stderr)
+        return 1
+    limit = model.joint_limits[index].max_effort
+    saturated = bool(np.nanmax(np.abs(effort)) >= 0.98 * limit) if np.any(
+        np.isfinite(effort)) else None
+    out = {"robot": model.name, "joint": args.joint, "driver": driver_name,
+           "ideal_motors": bool(cfg.values.get("sim.ideal_motors", False)) if simulated
+           else None, "sample_rate_hz": rate, **result.as_dict(),
+           "torque_saturated": saturated}
+    if saturated:
+        print(f"holonomic-drive-test: the step reached {args.joint}'s torque limit "
+              f"({limit:g} N m): the rise time is set by that limit, not by the loop; "
+              "try a smaller --amplitude", file=sys.stderr)
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"{model.name} {args.joint} ({driver_name}): step {amplitude:g} rad/s, "
+              f"sampled at {rate:g} Hz")
+        print(f"  rise time (10-90 %)   {1e3 * result.rise_time_s:8.2f} ms")
+        print(f"  overshoot             {100 * result.overshoot:8.1f} %")
+        print(f"  settling time (2 %)   {1e3 * result.settling_time_s:8.2f} ms")
+        print(f"  steady-state error    {result.steady_state_error:8.4f} rad/s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
