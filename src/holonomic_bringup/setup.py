@@ -25,6 +25,7 @@ setup(
             "holonomic-demo = holonomic_bringup.demo:main",
             "holonomic-teleop = holonomic_bringup.teleop:main",
             "holonomic-plot = holonomic_bringup.recording_plot:main",
+            "holonomic-calibrate = holonomic_bringup.calibrate:main",
             "base_controller = holonomic_bringup.base_controller_node:main",
         ],
     },

@@ -20,6 +20,7 @@ which store a value and return; they never touch the driver.
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import enum
 import math
 import numbers
@@ -269,6 +270,8 @@ class BaseController:
                                       self.dt, c.monitor)
         self._clock = clock
         self._max_rates = self.model.max_joint_velocity
+        offsets = self.model.joint_offsets
+        self._joint_offsets = offsets if offsets.any() else None
         #: the torque-mode law (None in velocity mode)
         self.torque = (OperationalSpaceController(
             self.model, c.torque_kp, c.torque_kv,
@@ -358,6 +361,11 @@ class BaseController:
         except DriverError as exc:
             self._on_fault(exc)
             return False
+        if self._joint_offsets is not None:
+            # encoder zeros (joints.*.position_offset): odometry, inverse
+            # kinematics and joint_states all see kinematic angles
+            reading = dataclasses.replace(reading,
+                                          positions=reading.positions - self._joint_offsets)
         problem = self.monitor.check(reading, self._clock(),
                                      self.joint_command if self.driver.armed else None)
         if problem is not None:

@@ -69,23 +69,37 @@ def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, flo
     return (c * vx_w + s * vy_w, -s * vx_w + c * vy_w, wz)
 
 
-def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
-              area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0) -> Trial:
-    """One random run and return; the final error of every estimator."""
-    overrides = dict(CONDITIONS[condition])
-    overrides.update({"sim.seed": seed, "cmd_timeout": 0.0, "enable_on_start": True})
+@dataclass
+class Run:
+    """The recording of one simulated run: every joint reading as the
+    controller saw it (encoder zeros subtracted) and the true pose."""
+
+    config: object                       # the RobotConfig the controller ran
+    stamps: list = field(default_factory=list)       # [s]
+    positions: list = field(default_factory=list)    # joint positions [rad]
+    truths: list = field(default_factory=list)       # (x, y, yaw) [m, m, rad] in odom
+    hidden_truth: dict = field(default_factory=dict)  # the simulator's hidden geometry
+
+
+def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
+             speed: float = 1.25, acceleration: float = 2.0,
+             overrides: dict | None = None) -> Run:
+    """Random moves inside ``area`` [m] for ``duration`` [s] (targets drawn
+    from ``seed``), then back to the start; ``overrides`` are config keys
+    (simulator faults, calibrated parameters)."""
+    merged = {"sim.seed": seed, "cmd_timeout": 0.0, "enable_on_start": True}
     for axis in ("x", "y"):
-        overrides[f"limits.linear.{axis}.max_velocity"] = speed
-        overrides[f"limits.linear.{axis}.max_acceleration"] = acceleration
-        overrides[f"limits.linear.{axis}.max_deceleration"] = acceleration
-    cfg = load_config(robot, overrides)
+        merged[f"limits.linear.{axis}.max_velocity"] = speed
+        merged[f"limits.linear.{axis}.max_acceleration"] = acceleration
+        merged[f"limits.linear.{axis}.max_deceleration"] = acceleration
+    merged.update(overrides or {})
+    cfg = load_config(robot, merged)
     clock = ManualClock()
     driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
     rng = np.random.default_rng(seed)
     wz_max = min(1.5, cfg.controller.max_velocity[2])
-    readings = []
-    truths = []
-    t_wall = time.perf_counter()
+    run = Run(cfg)
+    readings, truths = run.positions, run.truths
     with driver:
         ctrl = BaseController(cfg, driver, clock=clock)
         ctrl.request_enable(True)
@@ -93,7 +107,8 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
         def step():
             ctrl.step()
             clock.now = ctrl.reading.stamp
-            readings.append((ctrl.reading.stamp, ctrl.reading.positions.copy()))
+            run.stamps.append(ctrl.reading.stamp)
+            readings.append(ctrl.reading.positions.copy())
             truths.append(driver.ground_truth().pose.copy())
 
         step()
@@ -119,6 +134,21 @@ def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
         ctrl.set_command((0.0, 0.0, 0.0))
         for _ in range(int(0.5 * cfg.controller.control_rate)):
             step()
+        run.hidden_truth = dict(getattr(driver, "hidden_truth", {}))
+    return run
+
+
+def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
+              area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0,
+              overrides: dict | None = None) -> Trial:
+    """One random run and return; the final error of every estimator.
+    ``overrides``: config keys applied over the condition's (e.g. a
+    calibration overlay, or a fixed ``sim.seed`` for one set of tyres)."""
+    t_wall = time.perf_counter()
+    run = simulate(robot, seed, duration, area, speed, acceleration,
+                   {**CONDITIONS[condition], **(overrides or {})})
+    cfg, truths = run.config, run.truths
+    readings = list(zip(run.stamps, run.positions))
     truth_end = truths[-1]
     path = np.array(truths)
     trial = Trial(robot, condition, seed,
