@@ -32,17 +32,21 @@ class TurretCalibration:
         self.length_scale = float(kin.b)
 
     def slip(self, theta: np.ndarray, samples: Samples) -> np.ndarray:
-        return np.zeros(0)
+        """No fit residual (... x 0)."""
+        return np.zeros(np.shape(theta)[:-1] + (0,))
 
     def body(self, theta: np.ndarray, samples: Samples) -> np.ndarray:
-        """Body displacement (dx [m], dy [m], dtheta [rad]) of base_link per sample."""
-        r_left, r_right, a, zero = theta
+        """Body displacement (dx [m], dy [m], dtheta [rad]) of base_link per
+        sample (... x N x 3); ``theta`` may carry leading batch axes."""
+        theta = np.asarray(theta, float)[..., None, :]
+        r_left, r_right, a, zero = (theta[..., k] for k in range(4))
         phi = samples.positions[:, 2] - (zero - self._configured_zero)
         d = samples.displacements
         vl, vr = r_left * d[:, 0], r_right * d[:, 1]
         v, wd = 0.5 * (vl + vr), 0.5 * (vr - vl) / a
         s, c = np.sin(phi), np.cos(phi)
-        return np.column_stack((v * c + self.b * wd * s, -v * s + self.b * wd * c, wd + d[:, 2]))
+        return np.stack((v * c + self.b * wd * s, -v * s + self.b * wd * c, wd + d[:, 2]),
+                        axis=-1)
 
     def overlay(self, theta: np.ndarray) -> dict[str, float]:
         return {k: float(v) for k, v in zip(self.keys, theta)}

@@ -381,6 +381,16 @@ class BaseControllerNode(Node):
             self._status(f"{NODE_NAME}: odometry", DiagnosticStatus.OK,
                          f"{odo.estimator}, {odo.distance:.2f} m", odo_values),
         ]
+        if c.drift is not None:
+            # its own status: a geometry that drifted is not a slip event
+            findings = c.drift.findings()
+            statuses.append(self._status(
+                f"{NODE_NAME}: calibration",
+                DiagnosticStatus.WARN if findings else DiagnosticStatus.OK,
+                findings[0] if findings else
+                "not enough motion yet to judge the geometry" if c.drift.error is None else
+                "configured geometry consistent with the motion",
+                c.drift.values()))
         for status in statuses:
             status.hardware_id = robot
         self.diag_pub.publish(DiagnosticArray(header=Header(stamp=now), status=statuses))

@@ -112,16 +112,15 @@ def samples_from_readings(stamps: Sequence[float], positions: np.ndarray,
 
 
 def chord(body: np.ndarray) -> np.ndarray:
-    """(N x 3) constant-twist arcs (dx, dy, dtheta) -> their chords (cx, cy,
+    """(... x 3) constant-twist arcs (dx, dy, dtheta) -> their chords (cx, cy,
     dtheta): the displacement of the origin in the start frame, as
     :func:`holonomic_core.odometry.compose_arc` integrates one arc."""
-    dth = body[:, 2]
+    dx, dy, dth = body[..., 0], body[..., 1], body[..., 2]
     small = np.abs(dth) < 1e-6
     safe = np.where(small, 1.0, dth)
     a = np.where(small, 1.0 - dth * dth / 6.0, np.sin(safe) / safe)
     b = np.where(small, 0.5 * dth, (1.0 - np.cos(safe)) / safe)
-    return np.column_stack((a * body[:, 0] - b * body[:, 1], b * body[:, 0] + a * body[:, 1],
-                            dth))
+    return np.stack((a * dx - b * dy, b * dx + a * dy, dth), axis=-1)
 
 
 class FamilyCalibration(Protocol):
@@ -200,26 +199,39 @@ def _normaliser(family: FamilyCalibration) -> np.ndarray:
                      for i, k in enumerate(family.kinds)])
 
 
-def _residuals(family, theta, samples, use_reference, gauge_mean):
-    parts = [np.ravel(family.slip(theta, samples))]
-    if use_reference:
-        est = chord(family.body(theta, samples))
-        err = est - samples.reference
-        err[:, 2] *= family.length_scale
-        parts.append(err.ravel())
-    if gauge_mean is not None:
-        radii = theta[[k == "radius" for k in family.kinds]]
-        parts.append(np.array([_GAUGE_WEIGHT * (radii.mean() / gauge_mean - 1.0)]))
-    return np.concatenate(parts)
+def residual_function(family, samples: Samples, use_reference: bool = False,
+                      gauge_mean: float | None = None):
+    """``(fun, scale)``: ``fun(z)`` is the residual vector [m] at ``theta =
+    family.nominal + scale * z`` -- the fit residuals, then (with
+    ``use_reference``) the chords' misfit to the reference, then (with
+    ``gauge_mean`` [m]) one row that holds the mean radius there."""
+    scale = _normaliser(family)
+    radius = np.array([k == "radius" for k in family.kinds])
+
+    def fun(z):
+        # z (p,) -> (m,) residuals; z (k, p) -> (k, m), one row per parameter set
+        theta = family.nominal + scale * np.asarray(z, float)
+        lead = theta.shape[:-1]
+        parts = [np.reshape(family.slip(theta, samples), lead + (-1,))]
+        if use_reference:
+            err = chord(family.body(theta, samples)) - samples.reference
+            err[..., 2] *= family.length_scale
+            parts.append(np.reshape(err, lead + (-1,)))
+        if gauge_mean is not None:
+            mean = theta[..., radius].mean(axis=-1, keepdims=True)
+            parts.append(_GAUGE_WEIGHT * (mean / gauge_mean - 1.0))
+        return np.concatenate(parts, axis=-1)
+
+    return fun, scale
 
 
-def _jacobian(fun, z, step=1e-6):
-    cols = []
-    for j in range(len(z)):
-        dz = np.zeros_like(z)
-        dz[j] = step
-        cols.append((fun(z + dz) - fun(z - dz)) / (2 * step))
-    return np.column_stack(cols)
+def jacobian(fun, z: np.ndarray, step: float = 1e-6) -> np.ndarray:
+    """Central-difference Jacobian of ``fun`` at ``z`` (normalised
+    parameters), all columns in one batched call."""
+    p = len(z)
+    plus_minus = z + step * np.vstack((np.eye(p), -np.eye(p)))
+    values = fun(plus_minus)
+    return ((values[:p] - values[p:]) / (2 * step)).T
 
 
 def calibrate(model, samples: Samples, reference: str = "none",
@@ -245,17 +257,14 @@ def calibrate(model, samples: Samples, reference: str = "none",
             "parameter: calibrate against --reference ground_truth")
     radius = np.array([k == "radius" for k in family.kinds])
     gauge = None if use_ref else float(family.nominal[radius].mean())
-    scale = _normaliser(family)
-
-    def fun(z):
-        return _residuals(family, family.nominal + scale * z, samples, use_ref, gauge)
+    fun, scale = residual_function(family, samples, use_ref, gauge)
 
     z = np.zeros(len(family.nominal))
     r = fun(z)
     cost = float(r @ r)
     lam = 1e-3
     for _ in range(iterations):
-        J = _jacobian(fun, z)
+        J = jacobian(fun, z)
         A, g = J.T @ J, J.T @ r
         improved = False
         for _ in range(10):
@@ -263,12 +272,13 @@ def calibrate(model, samples: Samples, reference: str = "none",
             r_new = fun(z + step)
             cost_new = float(r_new @ r_new)
             if cost_new < cost:
-                z, r, lam, improved = z + step, r_new, max(lam / 10, 1e-9), True
+                z, r, cost, improved = z + step, r_new, cost_new, True
+                lam = max(lam / 10, 1e-9)
                 break
             lam *= 10
         if not improved or np.max(np.abs(step)) < 1e-9:
             break
-    J = _jacobian(fun, z)
+    J = jacobian(fun, z)
     m = len(r) - (1 if gauge is not None else 0)
     dof = max(m - len(z) + (1 if gauge is not None else 0), 1)
     body_r = r[:m]
@@ -313,16 +323,16 @@ def _apply_distance(result: CalibrationResult, samples: Samples, distance: float
 
 #: largest acceptable standard error before the recording counts as not
 #: exciting a parameter: relative for lengths, radians for zeros
-_MAX_SE = {"radius": 0.005, "offset": 0.1, "length": 0.005, "zero": math.radians(1.0)}
-#: eigenvalue ratio (in units of _MAX_SE) below which a direction is unobservable
+MAX_STDERR = {"radius": 0.005, "offset": 0.1, "length": 0.005, "zero": math.radians(1.0)}
+#: eigenvalue ratio (in units of MAX_STDERR) below which a direction is unobservable
 _MIN_CONDITION = 1e-12
 
 
 def weakest_direction(family, info: np.ndarray, sigma2: float) -> str | None:
     """None when the information matrix ``info`` (normalised parameters)
-    determines every parameter to within _MAX_SE; else a phrase naming the
+    determines every parameter to within MAX_STDERR; else a phrase naming the
     parameters the data leaves (nearly) free."""
-    tol = np.array([_MAX_SE[k] for k in family.kinds])
+    tol = np.array([MAX_STDERR[k] for k in family.kinds])
     vals, vecs = np.linalg.eigh(tol[:, None] * info * tol[None, :])
     if not vals[-1] > 0:
         return "no usable motion in the recording"

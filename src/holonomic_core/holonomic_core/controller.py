@@ -34,6 +34,7 @@ import numpy as np
 from holonomic_core.driver import (DRIVER_REGISTRY, Driver, DriverError, DriverFault,
                                    DriverState, JointReading, driver_class)
 from holonomic_core.kinematics import ESTIMATORS
+from holonomic_core.drift_watch import DRIFT_SPECS, DriftWatch
 from holonomic_core.limits import TwistLimiter, is_finite_twist, saturate_joint_rates
 from holonomic_core.model import (RobotModel, build_model, check_no_unknown, read_params_file,
                                   resolve_config)
@@ -129,7 +130,7 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "How long a joint may miss its command by safety.tracking_error before the "
               "controller faults [s]; 0 disables the check.",
               default=0.5, minimum=0.0, maximum=60.0),
-] + _limit_specs()
+] + _limit_specs() + DRIFT_SPECS
 
 
 @dataclass(frozen=True)
@@ -272,6 +273,8 @@ class BaseController:
         self._max_rates = self.model.max_joint_velocity
         offsets = self.model.joint_offsets
         self._joint_offsets = offsets if offsets.any() else None
+        #: the calibration drift watch (None where it does not apply)
+        self.drift = DriftWatch.from_config(self.model, config.values)
         #: the torque-mode law (None in velocity mode)
         self.torque = (OperationalSpaceController(
             self.model, c.torque_kp, c.torque_kv,
@@ -378,6 +381,8 @@ class BaseController:
             return False
         self.reading = reading
         self.odometry.update(reading.positions, reading.stamp)
+        if self.drift is not None:
+            self.drift.update(reading.stamp, reading.positions)
 
         if not self.driver.armed:
             self.twist_command[:] = 0.0

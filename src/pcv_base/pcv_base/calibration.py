@@ -39,9 +39,12 @@ class CasterCalibration:
         self.length_scale = float(np.sqrt(np.mean(self.sx ** 2 + self.sy ** 2)))
 
     def _fit(self, theta: np.ndarray, samples: Samples):
-        """Per sample the rigid fit (tx, ty, wz) and the residuals (N x n x 2)."""
+        """Per sample the rigid fit (dx, dy, dtheta) (... x N x 3) and the
+        residuals (... x N x n x 2); ``theta`` may carry leading batch axes
+        (one Jacobian column each)."""
         n = self.n
-        r, b, zero = theta[:n], theta[n:2 * n], theta[2 * n:]
+        theta = np.asarray(theta, float)[..., None, :]        # broadcast over samples
+        r, b, zero = theta[..., :n], theta[..., n:2 * n], theta[..., 2 * n:]
         # samples carry the configured zeros already subtracted
         phi = samples.positions[:, 0::2] - (zero - self._configured_zero)
         dphi, drho = samples.displacements[:, 0::2], samples.displacements[:, 1::2]
@@ -49,21 +52,21 @@ class CasterCalibration:
         px, py = self.sx - b * c, self.sy - b * s
         u = -b * s * dphi + r * c * drho
         w = b * c * dphi + r * s * drho
-        cx, cy = px.mean(axis=1, keepdims=True), py.mean(axis=1, keepdims=True)
-        mu, mw = u.mean(axis=1, keepdims=True), w.mean(axis=1, keepdims=True)
+        cx, cy = px.mean(axis=-1, keepdims=True), py.mean(axis=-1, keepdims=True)
+        mu, mw = u.mean(axis=-1, keepdims=True), w.mean(axis=-1, keepdims=True)
         qx, qy = px - cx, py - cy
-        wz = (qx * w - qy * u).sum(axis=1, keepdims=True) / (qx * qx + qy * qy).sum(
-            axis=1, keepdims=True)
-        residual = np.stack((u - mu + wz * qy, w - mw - wz * qx), axis=2)
-        body = np.column_stack(((mu + wz * cy)[:, 0], (mw - wz * cx)[:, 0], wz[:, 0]))
+        wz = (qx * w - qy * u).sum(axis=-1, keepdims=True) / (qx * qx + qy * qy).sum(
+            axis=-1, keepdims=True)
+        residual = np.stack((u - mu + wz * qy, w - mw - wz * qx), axis=-1)
+        body = np.concatenate((mu + wz * cy, mw - wz * cx, wz), axis=-1)
         return body, residual
 
     def slip(self, theta: np.ndarray, samples: Samples) -> np.ndarray:
-        """Contact displacements [m] the rigid fit leaves (N x n x 2)."""
+        """Contact displacements [m] the rigid fit leaves (... x N x n x 2)."""
         return self._fit(theta, samples)[1]
 
     def body(self, theta: np.ndarray, samples: Samples) -> np.ndarray:
-        """Body displacement (dx [m], dy [m], dtheta [rad]) per sample."""
+        """Body displacement (dx [m], dy [m], dtheta [rad]) per sample (... x N x 3)."""
         return self._fit(theta, samples)[0]
 
     def overlay(self, theta: np.ndarray) -> dict[str, float]:
