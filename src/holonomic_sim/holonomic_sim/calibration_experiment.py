@@ -47,19 +47,26 @@ TARGETS = {("pcv", "radius"): 0.002, ("pcv", "offset"): 0.02, ("pcv", "zero"): m
 
 
 def calibration_run(robot: str, sim_seed: int, duration: float = 120.0,
-                    reference: str = "ground_truth", faults: dict | None = None):
-    """(result, hidden truth, errors) of one simulated calibration drive;
-    errors per parameter: relative for lengths, radians for zeros."""
+                    reference: str = "ground_truth", faults: dict | None = None,
+                    passes: int = 2):
+    """(result, hidden truth, errors) of a simulated calibration: ``passes``
+    drives of ``duration`` [s], each with the previous pass's estimate
+    loaded. Errors per parameter: relative for lengths, radians for zeros."""
     kind = load_model(robot).kind
     faults = FAULTS[kind] if faults is None else faults
-    run = simulate(robot, sim_seed, duration,
-                   overrides={**faults, **CALIBRATION_DRIVE[kind], "sim.seed": sim_seed})
-    samples = samples_from_readings(run.stamps, np.array(run.positions), np.array(run.truths))
-    result = calibrate(run.config.model, samples, reference)
+    overlay = None
+    for _ in range(passes):
+        run = simulate(robot, sim_seed, duration,
+                       overrides={**faults, **CALIBRATION_DRIVE[kind], "sim.seed": sim_seed},
+                       calibration=overlay)
+        samples = samples_from_readings(run.stamps, np.array(run.positions),
+                                        np.array(run.truths))
+        result = calibrate(run.config.model, samples, reference)
+        overlay = result.overlay()
     fam = result.family
     errors = []
     for i, key in enumerate(fam.keys):
-        true = run.hidden_truth.get(key, fam.nominal[i])
+        true = run.hidden_truth.get(key, load_model(robot).params.get(key, 0.0))
         errors.append(result.theta[i] - true if fam.kinds[i] == "zero"
                       else result.theta[i] / true - 1.0)
     return result, run.hidden_truth, np.array(errors)
@@ -73,9 +80,11 @@ def odometry_errors(robot: str, sim_seed: int, overlay: dict, seeds: int,
     out = {"no faults": [], "faults, configured": [], "faults, calibrated": []}
     fixed = {**faults, "sim.seed": sim_seed}
     for seed in range(seeds):
-        for name, overrides in (("no faults", {}), ("faults, configured", fixed),
-                                ("faults, calibrated", {**fixed, **overlay})):
-            trial = run_trial(robot, "nominal (mu 1.0)", seed, overrides=overrides)
+        for name, overrides, calibration in (("no faults", {}, None),
+                                             ("faults, configured", fixed, None),
+                                             ("faults, calibrated", fixed, overlay)):
+            trial = run_trial(robot, "nominal (mu 1.0)", seed, overrides=overrides,
+                              calibration=calibration)
             out[name].append(trial.position_error["slip_min"])
             print(f"  {name:20s} path {seed}: {trial.position_error['slip_min'] * 1e3:6.1f} mm "
                   f"over {trial.distance:.1f} m", file=sys.stderr, flush=True)
@@ -89,6 +98,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="config name or YAML (repeatable; default xr4000, comr3, hamr)")
     parser.add_argument("--duration", type=float, default=120.0, help="calibration drive [s]")
     parser.add_argument("--sim-seed", type=int, default=1, help="seed of the hidden faults")
+    parser.add_argument("--passes", type=int, default=2,
+                        help="calibration drives, each with the previous estimate loaded")
     parser.add_argument("--seeds", type=int, default=3,
                         help="odometry runs (paths) per condition; 0 skips them")
     parser.add_argument("--faults", choices=("all", "tyres"), default="all",
@@ -108,13 +119,13 @@ def main(argv: list[str] | None = None) -> int:
         for reference in references:
             try:
                 result, truth, errors = calibration_run(robot, args.sim_seed, args.duration,
-                                                        reference, faults)
+                                                        reference, faults, args.passes)
             except CalibrationError as exc:
                 print(f"{robot}: {exc}")
                 failed = True
                 continue
             fam = result.family
-            print(f"\n{robot} ({kind}), {args.duration:g} s drive, faults {faults}, "
+            print(f"\n{robot} ({kind}), {args.passes} x {args.duration:g} s drive, faults {faults}, "
                   f"reference {reference}: {result.samples} samples, rms residual "
                   f"{result.rms_residual * 1e6:.1f} um")
             print(result.table(truth))

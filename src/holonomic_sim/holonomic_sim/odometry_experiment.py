@@ -83,19 +83,22 @@ class Run:
 
 def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
              speed: float = 1.25, acceleration: float = 2.0,
-             overrides: dict | None = None) -> Run:
+             overrides: dict | None = None, calibration: dict | None = None) -> Run:
     """Random moves inside ``area`` [m] for ``duration`` [s] (targets drawn
-    from ``seed``), then back to the start; ``overrides`` are config keys
-    (simulator faults, calibrated parameters)."""
+    from ``seed``), then back to the start. ``overrides``: config keys for
+    the controller and the simulated robot (e.g. simulator faults);
+    ``calibration``: config keys for the controller only (a calibration
+    overlay), so the simulated robot keeps its geometry and faults."""
     merged = {"sim.seed": seed, "cmd_timeout": 0.0, "enable_on_start": True}
     for axis in ("x", "y"):
         merged[f"limits.linear.{axis}.max_velocity"] = speed
         merged[f"limits.linear.{axis}.max_acceleration"] = acceleration
         merged[f"limits.linear.{axis}.max_deceleration"] = acceleration
     merged.update(overrides or {})
-    cfg = load_config(robot, merged)
+    cfg = load_config(robot, {**merged, **(calibration or {})})
+    physical = load_config(robot, merged).model if calibration else cfg.model
     clock = ManualClock()
-    driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
+    driver = cfg.driver_class(physical, cfg.values, cfg.controller.control_rate)
     rng = np.random.default_rng(seed)
     wz_max = min(1.5, cfg.controller.max_velocity[2])
     run = Run(cfg)
@@ -140,13 +143,14 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
 
 def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
               area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0,
-              overrides: dict | None = None) -> Trial:
+              overrides: dict | None = None, calibration: dict | None = None) -> Trial:
     """One random run and return; the final error of every estimator.
-    ``overrides``: config keys applied over the condition's (e.g. a
-    calibration overlay, or a fixed ``sim.seed`` for one set of tyres)."""
+    ``overrides``: config keys applied over the condition's (e.g. a fixed
+    ``sim.seed`` for one set of tyres); ``calibration``: a calibration
+    overlay for the controller (see :func:`simulate`)."""
     t_wall = time.perf_counter()
     run = simulate(robot, seed, duration, area, speed, acceleration,
-                   {**CONDITIONS[condition], **(overrides or {})})
+                   {**CONDITIONS[condition], **(overrides or {})}, calibration)
     cfg, truths = run.config, run.truths
     readings = list(zip(run.stamps, run.positions))
     truth_end = truths[-1]
