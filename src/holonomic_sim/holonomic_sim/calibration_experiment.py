@@ -96,7 +96,8 @@ def main(argv: list[str] | None = None) -> int:
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--robot", action="append",
                         help="config name or YAML (repeatable; default xr4000, comr3, hamr)")
-    parser.add_argument("--duration", type=float, default=120.0, help="calibration drive [s]")
+    parser.add_argument("--duration", type=float, default=60.0,
+                        help="each calibration drive [s] (default: 2 passes x 60 s)")
     parser.add_argument("--sim-seed", type=int, default=1, help="seed of the hidden faults")
     parser.add_argument("--passes", type=int, default=2,
                         help="calibration drives, each with the previous estimate loaded")
