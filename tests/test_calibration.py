@@ -27,7 +27,8 @@ def _pcv_truth():
     for i, n in enumerate(names):
         truth[f"pcv.{n}.wheel_radius"] = 0.055 * (1 + dr[i])
         truth[f"pcv.{n}.caster_offset"] = 0.02 * (1 + db[i])
-        truth[f"joints.{n}_steer_joint.position_offset"] = float(zeros[i])
+        # the encoder reads angle + zeros[i]: the correction is -zeros[i]
+        truth[f"joints.{n}_steer_joint.zero_correction"] = -float(zeros[i])
     return nominal, truth
 
 
@@ -68,8 +69,8 @@ def _teleop(seconds, dt=0.005, seed=0, rotation=True, sideways=True):
 def test_pcv_joint_data_of_another_geometry_gives_that_geometry_back():
     nominal, truth = _pcv_truth()
     true_model = load_model("xr4000", {k: v for k, v in truth.items() if k.startswith("pcv.")})
-    zeros = nominal.joint_offsets.copy()
-    zeros[0::2] = [truth[f"joints.{n}_steer_joint.position_offset"]
+    zeros = np.zeros(len(nominal.joint_names))
+    zeros[0::2] = [-truth[f"joints.{n}_steer_joint.zero_correction"]
                    for n in nominal.kinematics.caster_names]
     stamps, raw, _ = _drive(true_model, _teleop(40.0), zeros=zeros)
     # the configured model has no zeros: the controller hands the raw readings
@@ -81,7 +82,7 @@ def test_pcv_joint_data_of_another_geometry_gives_that_geometry_back():
         # slip-free data: only the 5 ms chords' discretisation separates the
         # fit from the truth (measured: radii 1e-6, offsets 1.1e-3 relative,
         # zeros 0.0012 deg; with 20 ms samples the offsets' error is 0.5 %)
-        tol = (math.radians(0.005) if "position_offset" in key else
+        tol = (math.radians(0.005) if "zero_correction" in key else
                3e-3 * value if "caster_offset" in key else 1e-5 * value)
         assert est[key] == pytest.approx(value, abs=tol), key
     assert result.rms_residual < 1e-6          # [m] per sample: nothing left to explain
@@ -126,7 +127,7 @@ def test_ddrot_is_calibrated_against_the_reference():
     est = calibrate(nominal, samples, "ground_truth").overlay()
     for key, value in truth.items():
         assert est[key] == pytest.approx(value, rel=2e-4), key
-    assert est["joints.turret_joint.position_offset"] == pytest.approx(math.radians(2.0),
+    assert est["joints.turret_joint.zero_correction"] == pytest.approx(-math.radians(2.0),
                                                                        abs=math.radians(0.01))
     with pytest.raises(CalibrationError, match="no redundant joint.*ground_truth"):
         calibrate(nominal, samples_from_readings(stamps, raw), "none")
@@ -174,7 +175,7 @@ def test_overlay_is_a_params_file_that_changes_the_model(tmp_path):
     from holonomic_core.controller import load_config
     overlay = {"pcv.front_left.wheel_radius": 0.0561,
                "pcv.rear_right.caster_offset": 0.021,
-               "joints.front_right_steer_joint.position_offset": 0.05}
+               "joints.front_right_steer_joint.zero_correction": 0.05}
     path = tmp_path / "overlay.yaml"
     path.write_text(yaml.safe_dump(overlay_document(overlay)))
     flat = read_params_file(path)
@@ -182,11 +183,11 @@ def test_overlay_is_a_params_file_that_changes_the_model(tmp_path):
     cfg = load_config("xr4000", flat)
     kin = cfg.model.kinematics
     assert kin.r[0] == 0.0561 and kin.b[2] == 0.021
-    assert cfg.model.joint_offsets[6] == 0.05
+    assert cfg.model.zero_corrections[6] == 0.05
 
 
 def test_family_parameters_are_the_config_keys():
     fam = family_for(load_model("comr3"))
     assert fam.keys[:3] == ("pcv.c1.wheel_radius", "pcv.c2.wheel_radius", "pcv.c3.wheel_radius")
-    assert fam.keys[-1] == "joints.c3_steer_joint.position_offset"
+    assert fam.keys[-1] == "joints.c3_steer_joint.zero_correction"
     assert list(fam.nominal[:6]) == [0.04] * 3 + [0.03] * 3

@@ -74,7 +74,7 @@ def test_a_recorded_drive_is_calibrated_and_the_overlay_loads(ros, tmp_path):
     from holonomic_core.model import read_params_file
     estimate = read_params_file(overlay)
     for caster in ("c1", "c2", "c3"):
-        key = f"joints.{caster}_steer_joint.position_offset"
+        key = f"joints.{caster}_steer_joint.zero_correction"
         # 30 s in real time, 664 samples: measured errors 0.020-0.024 deg
         # (faults up to 3 deg, 2.5 deg on c1)
         assert math.degrees(abs(estimate[key] - truth[key])) < 0.1, (key, estimate, truth)
@@ -86,12 +86,12 @@ def test_a_recorded_drive_is_calibrated_and_the_overlay_loads(ros, tmp_path):
         client = ros.create_client(GetParameters, "/cal2/base_controller/get_parameters")
         wait_until(lambda: client.service_is_ready(), 30, "the node's parameter service")
         future = client.call_async(GetParameters.Request(
-            names=["joints.c1_steer_joint.position_offset", "pcv.c2.caster_offset"]))
+            names=["joints.c1_steer_joint.zero_correction", "pcv.c2.caster_offset"]))
         wait_until(future.done, 10, "get_parameters")
         values = [v.double_value for v in future.result().values]
         ros.destroy_client(client)
     finally:
         assert again.stop() == 0, again.log()
-    assert values == pytest.approx([estimate["joints.c1_steer_joint.position_offset"],
+    assert values == pytest.approx([estimate["joints.c1_steer_joint.zero_correction"],
                                     estimate["pcv.c2.caster_offset"]], abs=1e-6)
     assert values[0] != 0.0

@@ -164,14 +164,15 @@ def test_tyre_radius_spread_changes_the_simulated_wheels_only():
 def test_steering_encoder_zero_errors_shift_only_the_readings():
     """Two drivers with the same seed: the same physics (the friction draws
     come first), so the readings differ by exactly the encoder errors, which
-    hidden_truth reports as the position_offset a calibration must find."""
+    hidden_truth reports (negated) as the zero_correction a calibration
+    must find."""
     plain = load_config("xr4000", {"sim.seed": 3})
     faulty = load_config("xr4000", {"sim.seed": 3, "sim.steer_zero_spread": 0.05,
                                     "sim.caster_offset_spread": 0.1})
     with SimDriver(plain.model, plain.values, 200.0) as a, \
             SimDriver(faulty.model, faulty.values, 200.0) as b:
         truth = b.hidden_truth
-        zeros = np.array([truth[f"joints.{j}.position_offset"]
+        zeros = -np.array([truth[f"joints.{j}.zero_correction"]
                           for j in plain.model.joint_names[0::2]])
         offsets = np.array([truth[f"pcv.{c}.caster_offset"]
                             for c in plain.model.kinematics.caster_names])
@@ -185,10 +186,10 @@ def test_steering_encoder_zero_errors_shift_only_the_readings():
 
 def test_the_controller_subtracts_the_configured_encoder_zeros():
     from holonomic_core.mock_driver import MockDriver
-    cfg = load_config("comr3", {"driver": "mock", "joints.c2_steer_joint.position_offset": 0.3})
+    cfg = load_config("comr3", {"driver": "mock", "joints.c2_steer_joint.zero_correction": 0.3})
     with MockDriver(cfg.model, cfg.values, 200.0) as driver:
         ctrl = BaseController(cfg, driver, clock=lambda: 0.0)
         ctrl.step()
         raw = driver.read().positions
-    # mock joints rest at 0: the controller sees -0.3 rad on c2's steering only
-    assert ctrl.reading.positions == pytest.approx(raw - [0, 0, 0.3, 0, 0, 0])
+    # mock joints rest at 0: the controller sees +0.3 rad on c2's steering only
+    assert ctrl.reading.positions == pytest.approx(raw + [0, 0, 0.3, 0, 0, 0])

@@ -1,7 +1,7 @@
 """Calibration model of a DDROT (see holonomic_core.calibration).
 
 Parameters theta: left and right wheel radius [m], half wheel separation a
-[m] and the turret encoder's zero [rad] (``joints.turret_joint.position_offset``).
+[m] and the turret encoder's zero [rad] (``joints.turret_joint.zero_correction``).
 Three joints for three degrees of freedom leave no fit residual, so the
 parameters are fitted to a reference (ground truth): ``body`` is the forward
 kinematics of offset_turret.py over each sample's joint displacement.
@@ -22,9 +22,9 @@ class TurretCalibration:
     def __init__(self, model):
         kin = model.kinematics
         self.b = kin.b
-        self._configured_zero = float(model.joint_offsets[2])
+        self._configured_zero = float(model.zero_corrections[2])
         self.keys = ("ddrot.left_wheel_radius", "ddrot.right_wheel_radius",
-                     "ddrot.half_wheel_separation", "joints.turret_joint.position_offset")
+                     "ddrot.half_wheel_separation", "joints.turret_joint.zero_correction")
         self.labels = ("left wheel radius", "right wheel radius", "half wheel separation a",
                        "turret zero")
         self.kinds = ("radius", "radius", "length", "zero")
@@ -40,7 +40,7 @@ class TurretCalibration:
         sample (... x N x 3); ``theta`` may carry leading batch axes."""
         theta = np.asarray(theta, float)[..., None, :]
         r_left, r_right, a, zero = (theta[..., k] for k in range(4))
-        phi = samples.positions[:, 2] - (zero - self._configured_zero)
+        phi = samples.positions[:, 2] + (zero - self._configured_zero)
         d = samples.displacements
         vl, vr = r_left * d[:, 0], r_right * d[:, 1]
         v, wd = 0.5 * (vl + vr), 0.5 * (vr - vl) / a

@@ -271,8 +271,8 @@ class BaseController:
                                       self.dt, c.monitor)
         self._clock = clock
         self._max_rates = self.model.max_joint_velocity
-        offsets = self.model.joint_offsets
-        self._joint_offsets = offsets if offsets.any() else None
+        corrections = self.model.zero_corrections
+        self._zero_corrections = corrections if corrections.any() else None
         #: the calibration drift watch (None where it does not apply)
         self.drift = DriftWatch.from_config(self.model, config.values)
         #: the torque-mode law (None in velocity mode)
@@ -364,11 +364,11 @@ class BaseController:
         except DriverError as exc:
             self._on_fault(exc)
             return False
-        if self._joint_offsets is not None:
-            # encoder zeros (joints.*.position_offset): odometry, inverse
+        if self._zero_corrections is not None:
+            # encoder zeros (joints.*.zero_correction): odometry, inverse
             # kinematics and joint_states all see kinematic angles
             reading = dataclasses.replace(reading,
-                                          positions=reading.positions - self._joint_offsets)
+                                          positions=reading.positions + self._zero_corrections)
         problem = self.monitor.check(reading, self._clock(),
                                      self.joint_command if self.driver.armed else None)
         if problem is not None:

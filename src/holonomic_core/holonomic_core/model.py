@@ -51,13 +51,14 @@ def joint_specs(joint: str) -> list[ParamSpec]:
                   f"Torque limit of {joint} [N m] (motor model of the simulator, "
                   "current limit of a real drive).",
                   default=10.0, minimum=0.0, exclusive_minimum=True, maximum=1e5),
-        # Subtracted from every position reading before the kinematics see
-        # it, so a steering or turret encoder whose zero moved (re-assembly)
-        # is corrected in the config; holonomic-calibrate estimates it.
-        ParamSpec(f"joints.{joint}.position_offset", "double",
-                  f"Encoder zero of {joint}: its raw reading [rad] when the joint is at its "
-                  "kinematic zero (a steering joint: the wheel rolls along base_link x; the "
-                  "turret: the drive base faces base_link x). The controller uses raw - offset.",
+        # Added to every position reading before the kinematics see it (the
+        # sign of the drivers' position_offset), so that a steering or turret
+        # encoder whose zero moved (re-assembly) is corrected in the config;
+        # holonomic-calibrate estimates it.
+        ParamSpec(f"joints.{joint}.zero_correction", "double",
+                  f"Correction [rad] added to {joint}'s reading so that 0 is its kinematic "
+                  "zero (a steering joint: the wheel rolls along base_link x; the turret: the "
+                  "drive base faces base_link x); holonomic-calibrate estimates it.",
                   default=0.0, minimum=-3.2, maximum=3.2),
     ]
 
@@ -94,10 +95,10 @@ class RobotModel:
         return np.array([j.max_velocity for j in self.joint_limits])
 
     @property
-    def joint_offsets(self) -> np.ndarray:
-        """Encoder zeros [rad], joint_names order (a fresh array): the
-        kinematics take ``raw reading - joint_offsets``."""
-        return np.array([self.params[f"joints.{j}.position_offset"] for j in self.joint_names])
+    def zero_corrections(self) -> np.ndarray:
+        """Encoder zero corrections [rad], joint_names order (a fresh array):
+        the kinematics take ``reading + zero_corrections``."""
+        return np.array([self.params[f"joints.{j}.zero_correction"] for j in self.joint_names])
 
     def inverse(self, positions, twist) -> np.ndarray:
         """Joint rates [rad/s] for base_link ``twist`` = (vx, vy, wz) at ``positions``."""

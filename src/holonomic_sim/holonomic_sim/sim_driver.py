@@ -98,7 +98,7 @@ class SimDriver(Driver):
             ParamSpec("sim.steer_zero_spread", "double",
                       "Error of each steering (PCV) or turret (DDROT) encoder's zero: the "
                       "simulated encoder reads angle + spread u_i, u_i uniform in [-1, 1], "
-                      "on top of the config's position_offset [rad].",
+                      "(the controller's zero_correction removes the configured part) [rad].",
                       default=0.0, minimum=0.0, maximum=0.5),
             ParamSpec("sim.seed", "int", "Seed of the per-wheel friction and geometry spreads.",
                       default=0, minimum=0, maximum=2 ** 31 - 1),
@@ -124,7 +124,10 @@ class SimDriver(Driver):
             1.0 + p["sim.friction_spread"] * rng.uniform(-1.0, 1.0, n_wheels))
         body_model = self._body_model(rng)
         self._zero_error = self._encoder_zeros(rng)
-        self._reading_offset = self.model.joint_offsets + self._zero_error
+        # the physical robot's encoders read (angle - its configured
+        # correction) + the zero error; a controller with the same config
+        # adds the correction back and sees angle + error
+        self._reading_offset = self._zero_error - self.model.zero_corrections
         try:
             if self._shared_world is not None:
                 if abs(self._shared_world.dt * self.physics_rate - 1.0) > 1e-9:
@@ -192,17 +195,17 @@ class SimDriver(Driver):
     def _encoder_zeros(self, rng: np.random.Generator) -> np.ndarray:
         """Per joint, the error [rad] of the encoder's zero (sim.steer_zero_spread):
         steering joints and the turret; recorded in :attr:`hidden_truth` as
-        the position_offset a perfect calibration writes."""
+        the zero_correction a perfect calibration writes."""
         spread = self.params["sim.steer_zero_spread"]
         names = self.model.joint_names
         zeros = np.zeros(len(names))
         if spread > 0.0:
             steer = [i for i, n in enumerate(names) if n.endswith(("steer_joint", "turret_joint"))]
             zeros[steer] = spread * rng.uniform(-1.0, 1.0, len(steer))
-            offsets = self.model.joint_offsets
+            corrections = self.model.zero_corrections
             for i in steer:
-                self.hidden_truth[f"joints.{names[i]}.position_offset"] = float(
-                    offsets[i] + zeros[i])
+                self.hidden_truth[f"joints.{names[i]}.zero_correction"] = float(
+                    corrections[i] - zeros[i])
         return zeros
 
     def _on_activate(self) -> None:

@@ -2,7 +2,7 @@
 
 Parameters theta, per caster i in config order: wheel radius r_i [m], caster
 offset b_i [m], and the steering encoder's zero o_i [rad] (the config key
-``joints.<name>_steer_joint.position_offset``). The residual is the one the
+``joints.<name>_steer_joint.zero_correction``, added to the reading). The residual is the one the
 slip-minimising estimator leaves (powered_caster.py, eq. 13): per sample, the
 sensed contact displacements ``u_i = b_i dphi_i n_i + r_i drho_i e_i`` at the
 contact points ``p_i = s_i - b_i e_i`` minus the rigid-body fit through them,
@@ -26,10 +26,10 @@ class CasterCalibration:
         names = kin.caster_names
         self.n = len(names)
         self.sx, self.sy = kin.sx, kin.sy
-        configured = model.joint_offsets[kin.steer_indices]
+        configured = model.zero_corrections[kin.steer_indices]
         self.keys = tuple([f"pcv.{c}.wheel_radius" for c in names]
                           + [f"pcv.{c}.caster_offset" for c in names]
-                          + [f"joints.{c}_steer_joint.position_offset" for c in names])
+                          + [f"joints.{c}_steer_joint.zero_correction" for c in names])
         self.labels = tuple([f"caster {c}: wheel radius" for c in names]
                             + [f"caster {c}: caster offset" for c in names]
                             + [f"caster {c}: steering zero" for c in names])
@@ -45,8 +45,8 @@ class CasterCalibration:
         n = self.n
         theta = np.asarray(theta, float)[..., None, :]        # broadcast over samples
         r, b, zero = theta[..., :n], theta[..., n:2 * n], theta[..., 2 * n:]
-        # samples carry the configured zeros already subtracted
-        phi = samples.positions[:, 0::2] - (zero - self._configured_zero)
+        # samples carry the configured corrections already added
+        phi = samples.positions[:, 0::2] + (zero - self._configured_zero)
         dphi, drho = samples.displacements[:, 0::2], samples.displacements[:, 1::2]
         c, s = np.cos(phi), np.sin(phi)
         px, py = self.sx - b * c, self.sy - b * s
