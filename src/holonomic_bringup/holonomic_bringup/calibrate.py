@@ -39,8 +39,9 @@ def overlay_document(values: dict[str, float]) -> dict:
 
 
 def read_recording(path: Path, robot: str, namespace: str | None):
-    """(model, stamps [s], positions (N x joints) [rad], true poses or None)
-    of one robot of the recording; raises ValueError with a one-line reason."""
+    """(model, recorded flat config, stamps [s], positions (N x joints) [rad],
+    true poses or None) of one robot of the recording; raises ValueError with
+    a one-line reason."""
     from holonomic_bringup.recording_plot import joint_arrays, load, stamped_poses
     from holonomic_core.model import build_model, load_model
 
@@ -74,7 +75,7 @@ def read_recording(path: Path, robot: str, namespace: str | None):
         matched = [k for k, s in enumerate(stamps) if s in gt]
         stamps, positions = stamps[matched], positions[matched]
         truth = np.array([gt[s] for s in stamps]) if len(matched) else None
-    return model, stamps, positions, truth
+    return model, robots[ns], stamps, positions, truth
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -107,8 +108,8 @@ def main(argv: list[str] | None = None) -> int:
     if not args.recording.is_file():
         return fail(f"no such file: {args.recording}")
     try:
-        model, stamps, positions, truth = read_recording(args.recording, args.robot,
-                                                         args.namespace)
+        model, recorded, stamps, positions, truth = read_recording(
+            args.recording, args.robot, args.namespace)
         if args.reference == "ground_truth" and truth is None:
             raise CalibrationError("--reference ground_truth needs ground_truth/odom in the "
                                    "recording (simulator runs publish it)")
@@ -121,6 +122,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{model.name} ({model.kind}) from {args.recording}: {result.samples} samples, "
           f"reference {reference}, rms residual {result.rms_residual * 1e6:.1f} um")
     print(result.table())
+    if model.kind == "pcv" and recorded.get("control_mode", "velocity") == "velocity":
+        result.notes.append("recorded in velocity mode: the wheel and steering loops impose the "
+                            "configured kinematics on the joints, so errors hardly show in them; "
+                            "record with -p control_mode:=torque (docs/calibration.md)")
     for note in result.notes:
         print(f"note: {note}")
     out = args.output or args.recording.with_suffix(".calibration.yaml")

@@ -12,15 +12,16 @@ problem
 where e_k is the contact-displacement residual of the slip-minimising fit of
 sample k (the per-sample twist eliminated in closed form: variable
 projection). One overall scale is unobservable without a reference (scaling
-every radius scales every twist alike while the casters trail); it comes from
-the simulator's ground truth (a body-displacement residual per sample) or a
-measured distance, or -- without either -- the mean radius stays as
-configured. The DDROT has no redundancy: it is calibrated against the
+every radius and caster offset together scales every sensed contact velocity
+alike); it comes from the simulator's ground truth (a body-displacement
+residual per sample) or a measured distance, or -- without either -- the mean
+radius stays as configured. The DDROT has no redundancy: it is calibrated against the
 reference alone.
 
 The solver is Levenberg-Marquardt on parameters normalised by their
 configured values (radii and offsets relative, zeros in radians), with a
-central-difference Jacobian of vectorised residuals. Standard errors come
+central-difference Jacobian of residuals vectorised over samples and
+parameter sets. Standard errors come
 from sigma^2 (J^T J)^-1 with sigma^2 the residual variance; consecutive
 samples' slip is correlated, so they are lower bounds.
 
@@ -132,7 +133,7 @@ class FamilyCalibration(Protocol):
     labels: tuple[str, ...]
     #: per parameter: "radius", "offset", "length" (relative) or "zero" (absolute, rad)
     kinds: tuple[str, ...]
-    #: configured values of theta (zeros: 0 = as configured)
+    #: configured values of theta (the config's radii, offsets, zero corrections)
     nominal: np.ndarray
     #: whether the joints alone (no reference) determine the parameters up to scale
     self_consistent: bool
@@ -140,10 +141,11 @@ class FamilyCalibration(Protocol):
     length_scale: float
 
     def slip(self, theta: np.ndarray, samples: Samples) -> np.ndarray:
-        """Fit residuals [m] (any shape; empty without redundancy)."""
+        """Fit residuals [m] (... x anything; no entries without redundancy);
+        ``theta`` (... x p) may carry leading batch axes."""
 
     def body(self, theta: np.ndarray, samples: Samples) -> np.ndarray:
-        """(N x 3) body motion (dx, dy, dtheta) estimated per interval."""
+        """(... x N x 3) body motion (dx [m], dy [m], dtheta [rad]) per interval."""
 
     def overlay(self, theta: np.ndarray) -> dict[str, float]:
         """Flat config keys -> values for a params-file overlay."""
@@ -249,9 +251,9 @@ def calibrate(model, samples: Samples, reference: str = "none",
     """Estimate the family's parameters from ``samples``.
 
     ``reference``: "ground_truth" (``samples.reference`` must be set) fixes
-    the scale from the true motion; "distance" scales the radii so that the
-    odometry's straight-line displacement from the first to the last sample
-    is ``distance`` [m] (measured by the user); "none" keeps the configured
+    the scale from the true motion; "distance" scales radii and caster
+    offsets so that the odometry's straight-line displacement from the first
+    to the last sample is ``distance`` [m] (measured by the user); "none" keeps the configured
     mean radius. Raises :class:`CalibrationError` (one line naming the
     missing motion) when the samples cannot determine the parameters.
     """
