@@ -31,10 +31,10 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from holonomic_core.drift_watch import DRIFT_SPECS, DriftWatch
 from holonomic_core.driver import (DRIVER_REGISTRY, Driver, DriverError, DriverFault,
                                    DriverState, JointReading, driver_class)
 from holonomic_core.kinematics import ESTIMATORS
-from holonomic_core.drift_watch import DRIFT_SPECS, DriftWatch
 from holonomic_core.limits import TwistLimiter, is_finite_twist, saturate_joint_rates
 from holonomic_core.model import (RobotModel, build_model, check_no_unknown, read_params_file,
                                   resolve_config)

@@ -65,7 +65,6 @@ class SimDriver(Driver):
         #: the simulated geometry where it differs from the config: flat
         #: config keys -> true values (what a perfect calibration writes)
         self.hidden_truth: dict[str, float] = {}
-        self._zero_error = np.zeros(len(model.joint_names))
         self._reading_offset = np.zeros(len(model.joint_names))
 
     @classmethod
@@ -97,7 +96,7 @@ class SimDriver(Driver):
                       default=0.0, minimum=0.0, maximum=0.2),
             ParamSpec("sim.steer_zero_spread", "double",
                       "Error of each steering (PCV) or turret (DDROT) encoder's zero: the "
-                      "simulated encoder reads angle + spread u_i, u_i uniform in [-1, 1], "
+                      "simulated encoder reads angle + spread u_i, u_i uniform in [-1, 1] "
                       "(the controller's zero_correction removes the configured part) [rad].",
                       default=0.0, minimum=0.0, maximum=0.5),
             ParamSpec("sim.seed", "int", "Seed of the per-wheel friction and geometry spreads.",
@@ -123,11 +122,10 @@ class SimDriver(Driver):
         friction = p["sim.wheel_friction"] * (
             1.0 + p["sim.friction_spread"] * rng.uniform(-1.0, 1.0, n_wheels))
         body_model = self._body_model(rng)
-        self._zero_error = self._encoder_zeros(rng)
         # the physical robot's encoders read (angle - its configured
         # correction) + the zero error; a controller with the same config
         # adds the correction back and sees angle + error
-        self._reading_offset = self._zero_error - self.model.zero_corrections
+        self._reading_offset = self._encoder_zeros(rng) - self.model.zero_corrections
         try:
             if self._shared_world is not None:
                 if abs(self._shared_world.dt * self.physics_rate - 1.0) > 1e-9:
