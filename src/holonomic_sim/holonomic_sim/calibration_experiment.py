@@ -46,18 +46,22 @@ TARGETS = {("pcv", "radius"): 0.002, ("pcv", "offset"): 0.02, ("pcv", "zero"): m
            ("ddrot", "zero"): math.radians(0.2)}
 
 
-def calibration_run(robot: str, sim_seed: int, duration: float = 120.0,
+def calibration_run(robot: str, sim_seed: int, duration: float = 60.0,
                     reference: str = "ground_truth", faults: dict | None = None,
-                    passes: int = 2):
+                    passes: int = 2, control_mode: str | None = None):
     """(result, hidden truth, errors) of a simulated calibration: ``passes``
     drives of ``duration`` [s], each with the previous pass's estimate
-    loaded. Errors per parameter: relative for lengths, radians for zeros."""
+    loaded; ``control_mode`` overrides CALIBRATION_DRIVE's. Errors per
+    parameter: relative for lengths, radians for zeros."""
     kind = load_model(robot).kind
     faults = FAULTS[kind] if faults is None else faults
+    drive = dict(CALIBRATION_DRIVE[kind])
+    if control_mode is not None:
+        drive["control_mode"] = control_mode
     overlay = None
     for _ in range(passes):
         run = simulate(robot, sim_seed, duration,
-                       overrides={**faults, **CALIBRATION_DRIVE[kind], "sim.seed": sim_seed},
+                       overrides={**faults, **drive, "sim.seed": sim_seed},
                        calibration=overlay)
         samples = samples_from_readings(run.stamps, np.array(run.positions),
                                         np.array(run.truths))
@@ -103,6 +107,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="calibration drives, each with the previous estimate loaded")
     parser.add_argument("--seeds", type=int, default=3,
                         help="odometry runs (paths) per condition; 0 skips them")
+    parser.add_argument("--control-mode", choices=("torque", "velocity"),
+                        help="of the calibration drives (default: torque for a PCV, velocity "
+                             "for a DDROT)")
     parser.add_argument("--faults", choices=("all", "tyres"), default="all",
                         help="all hidden faults, or the wheel radii only (the odometry "
                              "experiment's 'worn tyres' condition)")
@@ -120,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
         for reference in references:
             try:
                 result, truth, errors = calibration_run(robot, args.sim_seed, args.duration,
-                                                        reference, faults, args.passes)
+                                                        reference, faults, args.passes,
+                                                        args.control_mode)
             except CalibrationError as exc:
                 print(f"{robot}: {exc}")
                 failed = True
