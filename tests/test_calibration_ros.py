@@ -81,6 +81,19 @@ def test_a_recorded_drive_is_calibrated_and_the_overlay_loads(ros, tmp_path):
         # (faults up to 3 deg, 2.5 deg on c1)
         assert math.degrees(abs(estimate[key] - truth[key])) < 0.1, (key, estimate, truth)
 
+    # the recorded ground truth (matched to the joint states by stamp) fixes the scale
+    with_truth = tmp_path / "with_truth.yaml"
+    proc = cli("holonomic-calibrate", "comr3", str(bag), "--reference", "ground_truth",
+               "--output", str(with_truth))
+    assert proc.returncode == 0, proc.stderr
+    assert "reference ground_truth" in proc.stdout and "mean wheel radius" not in proc.stdout
+    scaled = read_params_file(with_truth)
+    for caster in ("c1", "c2", "c3"):
+        key = f"joints.{caster}_steer_joint.zero_correction"
+        assert math.degrees(abs(scaled[key] - truth[key])) < 0.1, (key, scaled, truth)
+        # no radius error was hidden: measured 0.003 % from 40 mm
+        assert scaled[f"pcv.{caster}.wheel_radius"] == pytest.approx(0.04, rel=5e-4)
+
     # the overlay is a params file the bringup takes, and it changes the model
     again = Bringup(["comr3", "--namespace", "cal2", "--params-file", str(overlay)],
                     tmp_path / "bringup2.log")
