@@ -49,7 +49,7 @@ TARGETS = {("pcv", "radius"): 0.002, ("pcv", "offset"): 0.02, ("pcv", "zero"): m
 def calibration_run(robot: str, sim_seed: int, duration: float = 60.0,
                     reference: str = "ground_truth", faults: dict | None = None,
                     passes: int = 2, control_mode: str | None = None):
-    """(result, hidden truth, errors) of a simulated calibration: ``passes``
+    """(result, truth, errors) of a simulated calibration: ``passes``
     drives of ``duration`` [s], each with the previous pass's estimate
     loaded; ``control_mode`` overrides CALIBRATION_DRIVE's. Errors per
     parameter: relative for lengths, radians for zeros."""
@@ -68,12 +68,12 @@ def calibration_run(robot: str, sim_seed: int, duration: float = 60.0,
         result = calibrate(run.config.model, samples, reference)
         overlay = result.overlay()
     fam = result.family
-    errors = []
-    for i, key in enumerate(fam.keys):
-        true = run.hidden_truth.get(key, load_model(robot).params.get(key, 0.0))
-        errors.append(result.theta[i] - true if fam.kinds[i] == "zero"
-                      else result.theta[i] / true - 1.0)
-    return result, run.hidden_truth, np.array(errors)
+    # the truth of every parameter: hidden where perturbed, else the config's
+    configured = load_model(robot).params
+    truth = {key: run.hidden_truth.get(key, configured[key]) for key in fam.keys}
+    errors = [result.theta[i] - truth[key] if fam.kinds[i] == "zero"
+              else result.theta[i] / truth[key] - 1.0 for i, key in enumerate(fam.keys)]
+    return result, truth, np.array(errors)
 
 
 def odometry_errors(robot: str, sim_seed: int, overlay: dict, seeds: int,
