@@ -257,6 +257,8 @@ def calibrate(model, samples: Samples, reference: str = "none",
     mean radius. Raises :class:`CalibrationError` (one line naming the
     missing motion) when the samples cannot determine the parameters.
     """
+    if reference not in ("none", "ground_truth", "distance"):
+        raise ValueError(f"reference must be none, ground_truth or distance, got {reference!r}")
     family = family_for(model)
     check_motion(family, samples)
     use_ref = reference == "ground_truth"
@@ -270,9 +272,6 @@ def calibrate(model, samples: Samples, reference: str = "none",
     radius = np.array([k == "radius" for k in family.kinds])
     gauge = None if use_ref else float(family.nominal[radius].mean())
     if reference == "distance":
-        if family.kinds.count("offset") == 0:
-            raise CalibrationError(f"a {model.kind} needs --reference ground_truth: a distance "
-                                   "fixes only the scale")
         if distance is None or not distance > 0:
             raise CalibrationError("--distance must be a measured distance > 0 [m]")
     fun, scale = residual_function(family, samples, use_ref, gauge)
