@@ -176,3 +176,26 @@ def test_load_model_hamr_follows_the_contract():
     wd = 0.1 / 0.1641
     np.testing.assert_allclose(model.inverse([0, 0, 0], [0, 0.1, 0]),
                                [-0.1641 * wd / 0.0615, 0.1641 * wd / 0.0615, -wd], atol=1e-12)
+
+
+def test_unequal_wheels_turn_the_drive_base_by_their_rim_speed_difference():
+    # both wheels at 10 rad/s, left r = 0.06, right r = 0.063: rim speeds 0.6
+    # and 0.63 m/s, so v = 0.615 m/s and wd = (0.63 - 0.6) / (2 a) with
+    # a = 0.15: 0.1 rad/s; at phi = 0 the turret axis (b = 0.2 ahead) also
+    # moves sideways at b wd = 0.02 m/s
+    kin = OffsetTurretKinematics(0.0615, 0.15, 0.2, left_wheel_radius=0.06,
+                                 right_wheel_radius=0.063)
+    q = np.zeros(3)
+    np.testing.assert_allclose(kin.forward(q, [10.0, 10.0, 0.0]), [0.615, 0.02, 0.1],
+                               atol=1e-12)
+    rng = np.random.default_rng(7)
+    for phi in TURRET_SWEEP:
+        twist = rng.uniform(-1, 1, 3)
+        q = np.array([0.0, 0.0, phi])
+        np.testing.assert_allclose(kin.forward(q, kin.inverse(q, twist)), twist, atol=1e-12)
+        np.testing.assert_allclose(kin.jacobian(q) @ kin.inverse(q, twist), twist, atol=1e-12)
+
+
+def test_per_wheel_radii_default_to_the_shared_radius():
+    model = load_model("hamr", {"ddrot.right_wheel_radius": 0.062})
+    assert (model.kinematics.r_left, model.kinematics.r_right) == (0.0615, 0.062)

@@ -149,6 +149,47 @@ def test_tyre_radius_spread_changes_the_simulated_wheels_only():
         assert np.all(np.abs(radii / 0.055 - 1.0) <= 0.02) and np.ptp(radii) > 1e-4
         assert "simulated_wheel_radii" in driver.status()
     assert cfg.model.kinematics.r == pytest.approx([0.055] * 4)     # the controller's model
-    hamr = load_config("hamr", {"sim.wheel_radius_spread": 0.02})
-    with pytest.raises(ConfigError, match="sim.wheel_radius_spread"):
+    # a DDROT's two wheels differ too; a caster offset spread needs casters
+    hamr = load_config("hamr", {"sim.wheel_radius_spread": 0.02, "sim.seed": 5})
+    with SimDriver(hamr.model, hamr.values, 200.0) as driver:
+        radii = np.array(driver.wheel_radii)
+        assert np.all(np.abs(radii / 0.0615 - 1.0) <= 0.02) and np.ptp(radii) > 1e-5
+        assert set(driver.hidden_truth) == {"ddrot.left_wheel_radius",
+                                            "ddrot.right_wheel_radius"}
+    hamr = load_config("hamr", {"sim.caster_offset_spread": 0.1})
+    with pytest.raises(ConfigError, match="sim.caster_offset_spread"):
         SimDriver(hamr.model, hamr.values, 200.0).configure()
+
+
+def test_steering_encoder_zero_errors_shift_only_the_readings():
+    """Two drivers with the same seed: the same physics (the friction draws
+    come first), so the readings differ by exactly the encoder errors, which
+    hidden_truth reports (negated) as the zero_correction a calibration
+    must find."""
+    plain = load_config("xr4000", {"sim.seed": 3})
+    faulty = load_config("xr4000", {"sim.seed": 3, "sim.steer_zero_spread": 0.05,
+                                    "sim.caster_offset_spread": 0.1})
+    with SimDriver(plain.model, plain.values, 200.0) as a, \
+            SimDriver(faulty.model, faulty.values, 200.0) as b:
+        truth = b.hidden_truth
+        zeros = -np.array([truth[f"joints.{j}.zero_correction"]
+                          for j in plain.model.joint_names[0::2]])
+        offsets = np.array([truth[f"pcv.{c}.caster_offset"]
+                            for c in plain.model.kinematics.caster_names])
+        assert np.all(np.abs(zeros) <= 0.05) and np.ptp(zeros) > 1e-3
+        assert np.all(np.abs(offsets / 0.02 - 1) <= 0.1) and np.ptp(offsets) > 1e-4
+        ra, rb = a.read(), b.read()
+    # the body with other offsets settles the steering a little differently:
+    # compare against the zero errors to 1e-3 rad, far below their spread
+    assert rb.positions[0::2] - ra.positions[0::2] == pytest.approx(zeros, abs=1e-3)
+
+
+def test_the_controller_subtracts_the_configured_encoder_zeros():
+    from holonomic_core.mock_driver import MockDriver
+    cfg = load_config("comr3", {"driver": "mock", "joints.c2_steer_joint.zero_correction": 0.3})
+    with MockDriver(cfg.model, cfg.values, 200.0) as driver:
+        ctrl = BaseController(cfg, driver, clock=lambda: 0.0)
+        ctrl.step()
+        raw = driver.read().positions
+    # mock joints rest at 0: the controller sees +0.3 rad on c2's steering only
+    assert ctrl.reading.positions == pytest.approx(raw + [0, 0, 0.3, 0, 0, 0])

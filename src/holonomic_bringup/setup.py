@@ -28,6 +28,7 @@ setup(
             "holonomic-plot = holonomic_bringup.recording_plot:main",
             "holonomic-ctl = holonomic_bringup.ctl:main",
             "holonomic-odometry-calibrate = holonomic_bringup.odometry_calibrate:main",
+            "holonomic-calibrate = holonomic_bringup.calibrate:main",
             "base_controller = holonomic_bringup.base_controller_node:main",
         ],
     },

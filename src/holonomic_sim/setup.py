@@ -20,6 +20,7 @@ setup(
         "console_scripts": [
             "holonomic-odometry-experiment = holonomic_sim.odometry_experiment:main",
             "holonomic-torque-experiment = holonomic_sim.torque_experiment:main",
+            "holonomic-calibration-experiment = holonomic_sim.calibration_experiment:main",
         ],
     },
 )

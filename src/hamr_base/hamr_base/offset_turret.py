@@ -41,7 +41,7 @@ from typing import Mapping
 import numpy as np
 
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics
-from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_core.schema import ConfigError, ParamSpec, number_or_none
 
 LEFT_WHEEL = "left_wheel_joint"
 RIGHT_WHEEL = "right_wheel_joint"
@@ -65,10 +65,17 @@ class OffsetTurretKinematics(BaseKinematics):
 
     kind = "ddrot"
 
-    def __init__(self, wheel_radius: float, half_wheel_separation: float, turret_offset: float):
+    def __init__(self, wheel_radius: float, half_wheel_separation: float, turret_offset: float,
+                 left_wheel_radius: float | None = None, right_wheel_radius: float | None = None):
         """``wheel_radius`` r [m] > 0, ``half_wheel_separation`` a [m] > 0,
-        ``turret_offset`` b [m] > 0 (b = 0 makes the base non-holonomic)."""
+        ``turret_offset`` b [m] > 0 (b = 0 makes the base non-holonomic);
+        ``left_wheel_radius`` / ``right_wheel_radius`` [m]: each wheel's own
+        radius when they differ (worn tyres; default ``wheel_radius``)."""
+        left = wheel_radius if left_wheel_radius is None else left_wheel_radius
+        right = wheel_radius if right_wheel_radius is None else right_wheel_radius
         for key, value in (("ddrot.wheel_radius", wheel_radius),
+                           ("ddrot.left_wheel_radius", left),
+                           ("ddrot.right_wheel_radius", right),
                            ("ddrot.half_wheel_separation", half_wheel_separation),
                            ("ddrot.turret_offset", turret_offset)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -76,7 +83,10 @@ class OffsetTurretKinematics(BaseKinematics):
                          "cannot move sideways, it is not holonomic)"
                          if key == "ddrot.turret_offset" else "")
                 raise ConfigError(key, value, "a finite number > 0" + extra)
-        self.r = float(wheel_radius)
+        self.r_left = float(left)
+        self.r_right = float(right)
+        #: mean wheel radius [m] (the body's ride height)
+        self.r = 0.5 * (self.r_left + self.r_right)
         self.a = float(half_wheel_separation)
         self.b = float(turret_offset)
 
@@ -92,8 +102,8 @@ class OffsetTurretKinematics(BaseKinematics):
         vx, vy, wz = twist[0], twist[1], twist[2]
         v = vx * c - vy * s                 # projection on the drive base's forward axis
         wd = (vx * s + vy * c) / self.b     # the turret axis swings on the lever b
-        return np.array([(v - self.a * wd) / self.r,
-                         (v + self.a * wd) / self.r,
+        return np.array([(v - self.a * wd) / self.r_left,
+                         (v + self.a * wd) / self.r_right,
                          wz - wd])
 
     def forward(self, positions: np.ndarray, velocities: np.ndarray,
@@ -104,8 +114,10 @@ class OffsetTurretKinematics(BaseKinematics):
         phi = positions[2]
         s, c = math.sin(phi), math.cos(phi)
         wl, wr, dphi = velocities[0], velocities[1], velocities[2]
-        v = 0.5 * self.r * (wl + wr)
-        wd = 0.5 * self.r * (wr - wl) / self.a
+        # each wheel's rim speed, then the unicycle of the drive base
+        vl, vr = self.r_left * wl, self.r_right * wr
+        v = 0.5 * (vl + vr)
+        wd = 0.5 * (vr - vl) / self.a
         return np.array([v * c + self.b * wd * s,
                          -v * s + self.b * wd * c,
                          wd + dphi])
@@ -119,10 +131,10 @@ class OffsetTurretKinematics(BaseKinematics):
         """J_joint_to_base (3x3): twist = J @ (wL, wR, phi_dot)."""
         phi = positions[2]
         s, c = math.sin(phi), math.cos(phi)
-        k = 0.5 * self.r / self.a
-        return np.array([[k * (self.a * c - self.b * s), k * (self.a * c + self.b * s), 0.0],
-                         [-k * (self.a * s + self.b * c), k * (self.b * c - self.a * s), 0.0],
-                         [-k, k, 1.0]])
+        kl, kr = 0.5 * self.r_left / self.a, 0.5 * self.r_right / self.a
+        return np.array([[kl * (self.a * c - self.b * s), kr * (self.a * c + self.b * s), 0.0],
+                         [-kl * (self.a * s + self.b * c), kr * (self.b * c - self.a * s), 0.0],
+                         [-kl, kr, 1.0]])
 
     def paper_jacobian(self, theta_s: float) -> np.ndarray:
         """Eq. 1 as printed, with s = sin, c = cos (the paper's frame, see module doc).
@@ -141,6 +153,14 @@ class OffsetTurretKinematics(BaseKinematics):
     def param_specs(cls, params: Mapping[str, object]) -> list[ParamSpec]:
         return [
             _positive("ddrot.wheel_radius", "Drive wheel radius r [m]."),
+            _positive("ddrot.left_wheel_radius",
+                      "Radius [m] of the left wheel when the two differ (default "
+                      "ddrot.wheel_radius).", default=number_or_none(params.get(
+                          "ddrot.wheel_radius"))),
+            _positive("ddrot.right_wheel_radius",
+                      "Radius [m] of the right wheel when the two differ (default "
+                      "ddrot.wheel_radius).", default=number_or_none(params.get(
+                          "ddrot.wheel_radius"))),
             _positive("ddrot.half_wheel_separation",
                       "Half the distance between the wheels' contact points, a [m]."),
             # minimum 0 inclusive: b = 0 reaches the constructor, whose error
@@ -169,11 +189,12 @@ class OffsetTurretKinematics(BaseKinematics):
     @classmethod
     def from_params(cls, values: Mapping[str, object]) -> "OffsetTurretKinematics":
         kin = cls(values["ddrot.wheel_radius"], values["ddrot.half_wheel_separation"],
-                  values["ddrot.turret_offset"])
+                  values["ddrot.turret_offset"], values["ddrot.left_wheel_radius"],
+                  values["ddrot.right_wheel_radius"])
         if values["body.wheel.width"] >= 2 * kin.a:
             raise ConfigError("body.wheel.width", values["body.wheel.width"],
                               f"< 2 a = {2 * kin.a:g} m (the wheels would overlap)")
-        if values["body.support.radius"] >= kin.r:
+        if values["body.support.radius"] >= min(kin.r_left, kin.r_right):
             raise ConfigError("body.support.radius", values["body.support.radius"],
                               f"< wheel radius {kin.r:g} m")
         return kin

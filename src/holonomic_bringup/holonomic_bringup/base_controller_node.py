@@ -472,6 +472,16 @@ class BaseControllerNode(Node):
             self._command_status(cmd_values),
             self._status(f"{NODE_NAME}: odometry", odo_level, odo_message, odo_values),
         ]
+        if c.drift is not None:
+            # its own status: a geometry that drifted is not a slip event
+            findings = c.drift.findings()
+            statuses.append(self._status(
+                f"{NODE_NAME}: calibration",
+                DiagnosticStatus.WARN if findings else DiagnosticStatus.OK,
+                findings[0] if findings else
+                "not enough motion yet to judge the geometry" if c.drift.error is None else
+                "configured geometry consistent with the motion",
+                c.drift.values()))
         for status in statuses:
             status.hardware_id = robot
         self.diag_pub.publish(DiagnosticArray(header=Header(stamp=now), status=statuses))

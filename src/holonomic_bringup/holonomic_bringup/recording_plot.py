@@ -68,6 +68,30 @@ def _cmd_arrays(samples):
     return t, np.array(rows)
 
 
+def joint_arrays(model, samples) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """From joint_states samples: (header stamps [s], positions, velocities
+    (N x joints) in ``model.joint_names`` order, receive times [s])."""
+    order = None
+    stamps, pos, vel, t = [], [], [], []
+    for received, m in samples:
+        if order is None:
+            order = [list(m.name).index(j) for j in model.joint_names]
+        stamps.append(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)
+        pos.append(np.asarray(m.position)[order])
+        vel.append(np.asarray(m.velocity)[order])
+        t.append(received)
+    n = len(model.joint_names)
+    return (np.array(stamps), np.array(pos).reshape(-1, n), np.array(vel).reshape(-1, n),
+            np.array(t))
+
+
+def stamped_poses(samples) -> dict[float, np.ndarray]:
+    """Odometry messages -> {header stamp [s]: (x, y, yaw) [m, m, rad]}."""
+    return {m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec: np.array(
+        (m.pose.pose.position.x, m.pose.pose.position.y, _yaw(m.pose.pose.orientation)))
+        for _, m in samples}
+
+
 def slip_residuals(flat: dict, samples) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Per-unit slip residuals [m/s] from joint_states samples, with the model
     of ``flat``; empty for a base without redundancy (the DDROT)."""
@@ -78,16 +102,9 @@ def slip_residuals(flat: dict, samples) -> tuple[np.ndarray, np.ndarray, list[st
     if not names or not samples:
         return np.zeros(0), np.zeros((0, 0)), names
     estimator = flat.get("estimator", "slip_min")
-    order = None
-    t, rows = [], []
-    for stamp, m in samples:
-        if order is None:
-            order = [list(m.name).index(j) for j in model.joint_names]
-        q = np.asarray(m.position)[order]
-        v = np.asarray(m.velocity)[order]
-        rows.append(kin.fit_residual(q, v, estimator))
-        t.append(stamp)
-    return np.array(t), np.array(rows), names
+    _, positions, velocities, t = joint_arrays(model, samples)
+    rows = [kin.fit_residual(q, v, estimator) for q, v in zip(positions, velocities)]
+    return t, np.array(rows), names
 
 
 def plot_robot(ns: str, flat: dict, series: dict, out: Path, stem: str) -> tuple[list[Path], dict]:

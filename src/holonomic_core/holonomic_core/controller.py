@@ -20,6 +20,7 @@ which store a value and return; they never touch the driver.
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import enum
 import math
 import numbers
@@ -30,6 +31,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from holonomic_core.drift_watch import DRIFT_SPECS, DriftWatch
 from holonomic_core.driver import (DRIVER_REGISTRY, Driver, DriverError, DriverFault,
                                    DriverState, JointReading, driver_class,
                                    sim_drives_driver)
@@ -168,7 +170,7 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "How long a joint may miss its command by safety.tracking_error before the "
               "controller faults [s]; 0 disables the check.",
               default=0.5, minimum=0.0, maximum=60.0),
-] + _limit_specs()
+] + _limit_specs() + DRIFT_SPECS
 
 
 @dataclass(frozen=True)
@@ -324,6 +326,10 @@ class BaseController:
                                       self.dt, c.monitor)
         self._clock = clock
         self._max_rates = self.model.max_joint_velocity
+        corrections = self.model.zero_corrections
+        self._zero_corrections = corrections if corrections.any() else None
+        #: the calibration drift watch (None where it does not apply)
+        self.drift = DriftWatch.from_config(self.model, config.values)
         #: the torque-mode law (None in velocity mode)
         self.torque = (OperationalSpaceController(
             self.model, c.torque_kp, c.torque_kv,
@@ -424,6 +430,11 @@ class BaseController:
         except DriverError as exc:
             self._on_fault(exc)
             return False
+        if self._zero_corrections is not None:
+            # encoder zeros (joints.*.zero_correction): odometry, inverse
+            # kinematics and joint_states all see kinematic angles
+            reading = dataclasses.replace(reading,
+                                          positions=reading.positions + self._zero_corrections)
         problem = self.monitor.check(reading, self._clock(),
                                      self.joint_command if self.driver.armed else None)
         if problem is not None:
@@ -437,6 +448,8 @@ class BaseController:
         self.reading = reading
         if self.odometry.update(reading.positions, reading.stamp):
             self.slip_monitor.update(self.odometry.residual, reading.stamp)
+        if self.drift is not None:
+            self.drift.update(reading.stamp, reading.positions)
 
         if not self.driver.armed:
             self.twist_command[:] = 0.0

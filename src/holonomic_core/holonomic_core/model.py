@@ -53,6 +53,15 @@ def joint_specs(joint: str) -> list[ParamSpec]:
                   f"Torque limit of {joint} [N m] (motor model of the simulator, "
                   "current limit of a real drive).",
                   default=10.0, minimum=0.0, exclusive_minimum=True, maximum=1e5),
+        # Added to every position reading before the kinematics see it (the
+        # sign of the drivers' position_offset), so that a steering or turret
+        # encoder whose zero moved (re-assembly) is corrected in the config;
+        # holonomic-calibrate estimates it.
+        ParamSpec(f"joints.{joint}.zero_correction", "double",
+                  f"Correction [rad] added to {joint}'s reading so that 0 is its kinematic "
+                  "zero (a steering joint: the wheel rolls along base_link x; the turret: the "
+                  "drive base faces base_link x); holonomic-calibrate estimates it.",
+                  default=0.0, minimum=-3.2, maximum=3.2),
     ]
 
 
@@ -86,6 +95,12 @@ class RobotModel:
     def max_joint_velocity(self) -> np.ndarray:
         """Joint speed limits [rad/s], joint_names order (a fresh array)."""
         return np.array([j.max_velocity for j in self.joint_limits])
+
+    @property
+    def zero_corrections(self) -> np.ndarray:
+        """Encoder zero corrections [rad], joint_names order (a fresh array):
+        the kinematics take ``reading + zero_corrections``."""
+        return np.array([self.params[f"joints.{j}.zero_correction"] for j in self.joint_names])
 
     def inverse(self, positions, twist) -> np.ndarray:
         """Joint rates [rad/s], ``joint_names`` order, for the base_link ``twist``

@@ -221,3 +221,12 @@ def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
         except yaml.YAMLError as exc:
             raise ValueError(f"-p {name.strip()}: unreadable value {text!r}") from exc
     return out
+
+
+def number_or_none(value) -> float | None:
+    """``value`` as a float default for keys that fall back on a shared key
+    (``pcv.NAME.wheel_radius`` on ``pcv.wheel_radius``), or None when it is
+    not a number (then the key is required and validation says so)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value)

@@ -26,7 +26,9 @@ key                 unit    meaning
 physics_rate        Hz      fixed physics step rate, an integer multiple of control_rate
 wheel_friction      --      Coulomb friction coefficient of the drive wheels on the floor
 friction_spread     --      relative spread of per-wheel friction (uneven floor), 0..0.9
-seed                --      seed of that spread (reproducible runs)
+*_spread            --/rad  hidden geometry errors: wheel radius, caster offset, wheel
+                            separation, steering/turret encoder zero (calibration tests)
+seed                --      seed of the spreads (reproducible runs)
 ideal_motors        --      ideal velocity motors instead of the drive model
 lifted              --      base held in the air, wheels off the floor (bench test)
 drive.*             ...     the drive model (see :func:`drive_specs`)
@@ -70,6 +72,10 @@ class SimDriver(Driver):
         self._robot = None
         #: simulated wheel radii [m] when sim.wheel_radius_spread > 0
         self.wheel_radii: list[float] | None = None
+        #: the simulated geometry where it differs from the config: flat
+        #: config keys -> true values (what a perfect calibration writes)
+        self.hidden_truth: dict[str, float] = {}
+        self._reading_offset = np.zeros(len(model.joint_names))
 
     @classmethod
     def param_specs(cls, model) -> list[ParamSpec]:
@@ -87,10 +93,23 @@ class SimDriver(Driver):
             ParamSpec("sim.wheel_radius_spread", "double",
                       "Relative error of each simulated wheel's radius against the config "
                       "(worn or unevenly inflated tyres): r_i = r (1 + spread u_i), u_i "
-                      "uniform in [-1, 1]; the controller keeps the nominal radius. Casters "
-                      "only (a DDROT config has one radius for both wheels) [-].",
+                      "uniform in [-1, 1]; the controller keeps the nominal radius (casters, "
+                      "or a DDROT's two wheels) [-].",
                       default=0.0, minimum=0.0, maximum=0.2),
-            ParamSpec("sim.seed", "int", "Seed of the per-wheel friction and radius spreads.",
+            ParamSpec("sim.caster_offset_spread", "double",
+                      "Relative error of each simulated caster offset against the config: "
+                      "b_i = b (1 + spread u_i), u_i uniform in [-1, 1], hidden from the "
+                      "controller (PCV only) [-].", default=0.0, minimum=0.0, maximum=0.5),
+            ParamSpec("sim.wheel_separation_spread", "double",
+                      "Relative error of the simulated DDROT wheel separation against the "
+                      "config: a = a_config (1 + spread u), u uniform in [-1, 1] [-].",
+                      default=0.0, minimum=0.0, maximum=0.2),
+            ParamSpec("sim.steer_zero_spread", "double",
+                      "Error of each steering (PCV) or turret (DDROT) encoder's zero: the "
+                      "simulated encoder reads angle + spread u_i, u_i uniform in [-1, 1] "
+                      "(the controller's zero_correction removes the configured part) [rad].",
+                      default=0.0, minimum=0.0, maximum=0.5),
+            ParamSpec("sim.seed", "int", "Seed of the per-wheel friction and geometry spreads.",
                       default=0, minimum=0, maximum=2 ** 31 - 1),
             ParamSpec("sim.gui", "bool", "Open the pybullet GUI (needs a display).",
                       default=False),
@@ -123,6 +142,10 @@ class SimDriver(Driver):
         friction = p["sim.wheel_friction"] * (
             1.0 + p["sim.friction_spread"] * rng.uniform(-1.0, 1.0, n_wheels))
         body_model = self._body_model(rng)
+        # the physical robot's encoders read (angle - its configured
+        # correction) + the zero error; a controller with the same config
+        # adds the correction back and sees angle + error
+        self._reading_offset = self._encoder_zeros(rng) - self.model.zero_corrections
         drive = None if p["sim.ideal_motors"] else drive_spec(self.model, p)
         # the drives' spread has its own stream: adding it left the friction
         # and radius draws of a seed unchanged
@@ -147,23 +170,66 @@ class SimDriver(Driver):
 
     def _body_model(self, rng: np.random.Generator):
         """The model the simulated body is built from: the controller's, or
-        with per-wheel radius errors (``sim.wheel_radius_spread``), which the
-        controller does not know about -- the actuator conflict and slip of
-        real, imperfect tyres."""
-        spread = self.params["sim.wheel_radius_spread"]
-        if spread == 0.0:
+        with per-wheel radius, caster offset or wheel separation errors
+        (``sim.*_spread``), which the controller does not know about -- the
+        actuator conflict and slip of real, imperfect wheels. Records the
+        truth in :attr:`hidden_truth`."""
+        p = self.params
+        kin = self.model.kinematics
+        casters = getattr(kin, "casters", None)
+        flat = dict(self.model.params)
+        changed = {}
+        radius = p["sim.wheel_radius_spread"]
+        if radius > 0.0:
+            if casters is not None:
+                for caster, u in zip(casters, rng.uniform(-1.0, 1.0, len(casters))):
+                    changed[f"pcv.{caster.name}.wheel_radius"] = \
+                        caster.wheel_radius * (1.0 + radius * u)
+                self.wheel_radii = [changed[f"pcv.{c.name}.wheel_radius"] for c in casters]
+            else:
+                sides = rng.uniform(-1.0, 1.0, 2)
+                changed["ddrot.left_wheel_radius"] = kin.r_left * (1.0 + radius * sides[0])
+                changed["ddrot.right_wheel_radius"] = kin.r_right * (1.0 + radius * sides[1])
+                self.wheel_radii = [changed["ddrot.left_wheel_radius"],
+                                    changed["ddrot.right_wheel_radius"]]
+        offset = p["sim.caster_offset_spread"]
+        if offset > 0.0:
+            if casters is None:
+                raise ConfigError("sim.caster_offset_spread", offset,
+                                  f"0 for kinematics '{self.model.kind}' (casters only)")
+            for caster, u in zip(casters, rng.uniform(-1.0, 1.0, len(casters))):
+                changed[f"pcv.{caster.name}.caster_offset"] = \
+                    caster.caster_offset * (1.0 + offset * u)
+        separation = p["sim.wheel_separation_spread"]
+        if separation > 0.0:
+            if casters is not None:
+                raise ConfigError("sim.wheel_separation_spread", separation,
+                                  f"0 for kinematics '{self.model.kind}' (DDROT only)")
+            changed["ddrot.half_wheel_separation"] = kin.a * (
+                1.0 + separation * rng.uniform(-1.0, 1.0))
+        self.hidden_truth = dict(changed)
+        if not changed:
             return self.model
-        casters = getattr(self.model.kinematics, "casters", None)
-        if casters is None:
-            raise ConfigError("sim.wheel_radius_spread", spread,
-                              f"0 for kinematics '{self.model.kind}' (one radius for all wheels)")
         from holonomic_core.model import build_model
 
-        flat = dict(self.model.params)
-        for caster, u in zip(casters, rng.uniform(-1.0, 1.0, len(casters))):
-            flat[f"pcv.{caster.name}.wheel_radius"] = caster.wheel_radius * (1.0 + spread * u)
-        self.wheel_radii = [flat[f"pcv.{c.name}.wheel_radius"] for c in casters]
+        flat.update(changed)
         return build_model(flat)[0]
+
+    def _encoder_zeros(self, rng: np.random.Generator) -> np.ndarray:
+        """Per joint, the error [rad] of the encoder's zero (sim.steer_zero_spread):
+        steering joints and the turret; recorded in :attr:`hidden_truth` as
+        the zero_correction a perfect calibration writes."""
+        spread = self.params["sim.steer_zero_spread"]
+        names = self.model.joint_names
+        zeros = np.zeros(len(names))
+        if spread > 0.0:
+            steer = [i for i, n in enumerate(names) if n.endswith(("steer_joint", "turret_joint"))]
+            zeros[steer] = spread * rng.uniform(-1.0, 1.0, len(steer))
+            corrections = self.model.zero_corrections
+            for i in steer:
+                self.hidden_truth[f"joints.{names[i]}.zero_correction"] = float(
+                    corrections[i] - zeros[i])
+        return zeros
 
     def _on_activate(self) -> None:
         self._robot.command_velocities(np.zeros(len(self.model.joint_names)))
@@ -188,6 +254,9 @@ class SimDriver(Driver):
                 f"the simulated base tipped over ({math.degrees(self._robot.tilt()):.0f} deg)",
                 "pybullet")
         positions, velocities, efforts = self._robot.joint_states()
+        # the encoders report the angle plus their zero's error and the
+        # configured offset, which the controller subtracts again
+        positions = positions + self._reading_offset
         return JointReading(self._world.time, positions, velocities, efforts)
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:

@@ -182,14 +182,15 @@ def ddrot_urdf(model) -> str:
     effort, velocity = _limits(model, "turret_joint")
     parts.append(_joint("turret_joint", "continuous", "base_link", "drive_base",
                         (0, 0, z_axle), (0, 0, -1), effort, velocity))
-    for side, y in (("left", a), ("right", -a)):
+    for side, y, r_side in (("left", a, k.r_left), ("right", -a, k.r_right)):
         link = f"{side}_wheel"
         parts.append(f'<link name="{link}">'
-                     + _inertial(m_w, Inertia.cylinder_y(m_w, r, w_w))
-                     + _wheel_shapes(r, w_w) + "</link>")
+                     + _inertial(m_w, Inertia.cylinder_y(m_w, r_side, w_w))
+                     + _wheel_shapes(r_side, w_w) + "</link>")
         effort, velocity = _limits(model, f"{side}_wheel_joint")
+        # wheels of unequal radius (worn tyres): each axle at its own height
         parts.append(_joint(f"{side}_wheel_joint", "continuous", "drive_base", link,
-                            (-b, y, 0), (0, 1, 0), effort, velocity))
+                            (-b, y, r_side - r), (0, 1, 0), effort, velocity))
     return _robot(model.name, parts)
 
 

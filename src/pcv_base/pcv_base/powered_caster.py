@@ -88,7 +88,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics
-from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_core.schema import ConfigError, ParamSpec, number_or_none
 
 #: why the caster offset must be > 0, for the error messages
 _ZERO_OFFSET = ("b = 0 makes a caster a steered wheel that cannot move sideways without "
@@ -499,11 +499,11 @@ class PoweredCasterKinematics(BaseKinematics):
                               "base_link x, CCW.", minimum=-10.0, maximum=10.0),
                     ParamSpec(f"pcv.{name}.wheel_radius", "double",
                               f"Wheel radius [m] of caster {name} (default pcv.wheel_radius).",
-                              default=_number_or_none(shared_r), minimum=0.0,
+                              default=number_or_none(shared_r), minimum=0.0,
                               exclusive_minimum=True, maximum=10.0),
                     ParamSpec(f"pcv.{name}.caster_offset", "double",
                               f"Caster offset [m] of caster {name} (default "
-                              "pcv.caster_offset).", default=_number_or_none(shared_b),
+                              "pcv.caster_offset).", default=number_or_none(shared_b),
                               minimum=0.0, maximum=10.0),
                 ]
         return specs
@@ -545,10 +545,3 @@ def check_caster_names(names: list[str]) -> None:
             raise ConfigError("pcv.casters", names,
                               f"unique caster names ({name!r} twice would duplicate "
                               "the joint names)")
-
-
-def _number_or_none(value) -> float | None:
-    """A shared default for per-caster keys, or None (then they are required)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    return float(value)

@@ -1,0 +1,421 @@
+"""Self-calibration of a base's kinematic parameters from ordinary driving.
+
+A powered-caster vehicle measures its motion redundantly (2n joint rates for
+3 degrees of freedom). With the right wheel radii r_i, caster offsets b_i and
+steering zeros, the slip-minimising fit (C# = Cp+ Cq^-1) of every sample
+leaves only random slip; a wrong parameter leaves a *systematic* residual,
+correlated with the motion. Calibration is the nonlinear least-squares
+problem
+
+    theta* = argmin_theta  sum_k |e_k(theta)|^2  (+ reference terms)
+
+where e_k is the contact-displacement residual of the slip-minimising fit of
+sample k (the per-sample twist eliminated in closed form: variable
+projection). One overall scale is unobservable without a reference (scaling
+every radius and caster offset together scales every sensed contact velocity
+alike); it comes from the simulator's ground truth (a body-displacement
+residual per sample) or a measured distance, or -- without either -- the mean
+radius stays as configured. The DDROT has no redundancy: it is calibrated against the
+reference alone.
+
+The solver is Levenberg-Marquardt on parameters normalised by their
+configured values (radii and offsets relative, zeros in radians), with a
+central-difference Jacobian of residuals vectorised over samples and
+parameter sets. Standard errors come
+from sigma^2 (J^T J)^-1 with sigma^2 the residual variance; consecutive
+samples' slip is correlated, so they are lower bounds.
+
+Family-specific residuals live with each family (``pcv_base.calibration``,
+``hamr_base.calibration``); this module holds what they share.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Protocol, Sequence
+
+import numpy as np
+
+#: kinematics kind -> "module:Class" of its calibration model (lazy imports)
+CALIBRATION_MODELS = {
+    "pcv": "pcv_base.calibration:CasterCalibration",
+    "ddrot": "hamr_base.calibration:TurretCalibration",
+}
+
+#: weight of the gauge row that holds the mean radius when there is no reference
+_GAUGE_WEIGHT = 1e3
+#: below this speed [m/s] and turn rate [rad/s] a sample is "not moving"
+_STILL_SPEED, _STILL_TURN = 0.02, 0.05
+
+
+class CalibrationError(ValueError):
+    """The recording cannot determine the parameters; the message says why
+    and what motion is missing (one line, for the user)."""
+
+
+@dataclass(frozen=True)
+class Samples:
+    """Joint motion over consecutive intervals, in the kinematics' terms.
+
+    ``positions`` (N x joints) [rad]: mid-interval joint positions with the
+    config's encoder zeros already subtracted; ``displacements`` (N x joints)
+    [rad]: joint displacement over each interval; ``durations`` (N,) [s];
+    ``reference`` (N x 3) or None: the true body motion over each interval as
+    the chord (dx, dy) [m] in base_link at the interval's start and the turn
+    dtheta [rad] (from ground truth).
+    """
+
+    positions: np.ndarray
+    displacements: np.ndarray
+    durations: np.ndarray
+    reference: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.displacements)
+
+
+def samples_from_readings(stamps: Sequence[float], positions: np.ndarray,
+                          truth: np.ndarray | None = None, period: float = 0.02) -> Samples:
+    """Intervals between joint readings at least ``period`` [s] apart.
+
+    ``stamps`` [s], ``positions`` (N x joints) [rad] as the controller saw
+    them (its encoder zeros subtracted: ``joint_states`` and
+    ``BaseController.reading``), ``truth`` (N x 3) optional true poses (x, y,
+    yaw) [m, m, rad] in odom at the same stamps. Intervals in which no joint
+    moved are dropped (they carry no information).
+    """
+    stamps = np.asarray(stamps, float)
+    q = np.asarray(positions, float)
+    keep = [0]
+    for k in range(1, len(stamps)):
+        if stamps[k] - stamps[keep[-1]] >= period - 1e-9:
+            keep.append(k)
+    idx = np.array(keep)
+    if len(idx) < 2:
+        return Samples(np.zeros((0, q.shape[1])), np.zeros((0, q.shape[1])), np.zeros(0))
+    q0 = q[idx[:-1]]
+    # wrapped: a steering reading may jump by 2 pi; no joint turns half a
+    # revolution in one interval of a fraction of a second
+    disp = np.remainder(q[idx[1:]] - q0 + math.pi, 2 * math.pi) - math.pi
+    moving = np.abs(disp).max(axis=1) > 1e-6
+    ref = None
+    if truth is not None:
+        pose = np.asarray(truth, float)[idx]
+        d = pose[1:] - pose[:-1]
+        c, s = np.cos(pose[:-1, 2]), np.sin(pose[:-1, 2])
+        dth = np.remainder(d[:, 2] + math.pi, 2 * math.pi) - math.pi
+        ref = np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], dth))
+        ref = ref[moving]
+    return Samples((q0 + 0.5 * disp)[moving], disp[moving],
+                   np.diff(stamps[idx])[moving], ref)
+
+
+def chord(body: np.ndarray) -> np.ndarray:
+    """(... x 3) constant-twist arcs (dx, dy, dtheta) -> their chords (cx, cy,
+    dtheta): the displacement of the origin in the start frame, as
+    :func:`holonomic_core.odometry.compose_arc` integrates one arc."""
+    dx, dy, dth = body[..., 0], body[..., 1], body[..., 2]
+    small = np.abs(dth) < 1e-6
+    safe = np.where(small, 1.0, dth)
+    a = np.where(small, 1.0 - dth * dth / 6.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5 * dth, (1.0 - np.cos(safe)) / safe)
+    return np.stack((a * dx - b * dy, b * dx + a * dy, dth), axis=-1)
+
+
+class FamilyCalibration(Protocol):
+    """What a family provides to the solver (see pcv_base.calibration)."""
+
+    #: flat config keys of the parameters, in theta order
+    keys: tuple[str, ...]
+    #: human labels ("caster front_left: wheel radius")
+    labels: tuple[str, ...]
+    #: per parameter: "radius", "offset", "length" (relative) or "zero" (absolute, rad)
+    kinds: tuple[str, ...]
+    #: configured values of theta (the config's radii, offsets, zero corrections)
+    nominal: np.ndarray
+    #: whether the joints alone (no reference) determine the parameters up to scale
+    self_consistent: bool
+    #: length [m] that turns a heading residual into metres
+    length_scale: float
+
+    def slip(self, theta: np.ndarray, samples: Samples) -> np.ndarray:
+        """Fit residuals [m] (... x anything; no entries without redundancy);
+        ``theta`` (... x p) may carry leading batch axes."""
+
+    def body(self, theta: np.ndarray, samples: Samples) -> np.ndarray:
+        """(... x N x 3) body motion (dx [m], dy [m], dtheta [rad]) per interval."""
+
+    def overlay(self, theta: np.ndarray) -> dict[str, float]:
+        """Flat config keys -> values for a params-file overlay."""
+
+
+def family_for(model) -> FamilyCalibration:
+    """The calibration model of ``model``'s kinematic family."""
+    target = CALIBRATION_MODELS.get(model.kind)
+    if target is None:
+        raise CalibrationError(f"no calibration for kinematics '{model.kind}'")
+    module, _, name = target.partition(":")
+    return getattr(importlib.import_module(module), name)(model)
+
+
+@dataclass
+class CalibrationResult:
+    """Estimates theta [m, rad] with standard errors, per parameter."""
+
+    family: FamilyCalibration
+    theta: np.ndarray
+    stderr: np.ndarray
+    rms_residual: float             # [m] per residual entry
+    samples: int
+    reference: str                  # "none", "ground_truth" or "distance"
+    notes: list[str] = field(default_factory=list)
+
+    def overlay(self) -> dict[str, float]:
+        return self.family.overlay(self.theta)
+
+    def table(self, truth: Mapping[str, float] | None = None) -> str:
+        """One line per parameter: configured, estimate +- standard error,
+        change (and the truth, when known: flat keys -> values)."""
+        fam = self.family
+        lines = []
+        for i, label in enumerate(fam.labels):
+            zero = fam.kinds[i] == "zero"
+            unit, k = ("deg", 180.0 / math.pi) if zero else ("mm", 1e3)
+            nom, est, se = fam.nominal[i], self.theta[i], self.stderr[i]
+            change = (f"{math.degrees(est - nom):+6.2f} deg" if zero
+                      else f"{100 * (est / nom - 1):+6.2f} %")
+            line = (f"{label:34s} {k * nom:8.3f} -> {k * est:8.3f} +- {k * se:.3f} {unit} "
+                    f"({change})")
+            if truth is not None:
+                true = truth.get(fam.keys[i], nom)
+                line += f"  truth {k * true:8.3f} {unit}"
+            lines.append(line)
+        return "\n".join(lines)
+
+
+def _normaliser(family: FamilyCalibration) -> np.ndarray:
+    """theta = nominal + scale * z: relative units for lengths, radians for zeros."""
+    return np.array([1.0 if k == "zero" else family.nominal[i]
+                     for i, k in enumerate(family.kinds)])
+
+
+def end_point(family, theta: np.ndarray, samples: Samples) -> np.ndarray:
+    """(... x 2) position [m] of the last sample relative to the first, in the
+    first sample's base_link frame, by odometry with parameters ``theta``."""
+    moves = chord(family.body(theta, samples))
+    heading = np.cumsum(moves[..., 2], axis=-1) - moves[..., 2]    # before each move
+    c, s = np.cos(heading), np.sin(heading)
+    return np.stack(((c * moves[..., 0] - s * moves[..., 1]).sum(axis=-1),
+                     (s * moves[..., 0] + c * moves[..., 1]).sum(axis=-1)), axis=-1)
+
+
+def residual_function(family, samples: Samples, use_reference: bool = False,
+                      gauge_mean: float | None = None):
+    """``(fun, scale)``: ``fun(z)`` is the residual vector [m] at ``theta =
+    family.nominal + scale * z`` -- the fit residuals, then (with
+    ``use_reference``) the chords' misfit to the reference, then (with
+    ``gauge_mean`` [m]) one stiff row that holds the mean radius there."""
+    scale = _normaliser(family)
+    radius = np.array([k == "radius" for k in family.kinds])
+
+    def fun(z):
+        # z (p,) -> (m,) residuals; z (k, p) -> (k, m), one row per parameter set
+        theta = family.nominal + scale * np.asarray(z, float)
+        lead = theta.shape[:-1]
+        parts = [np.reshape(family.slip(theta, samples), lead + (-1,))]
+        if use_reference:
+            err = chord(family.body(theta, samples)) - samples.reference
+            err[..., 2] *= family.length_scale
+            parts.append(np.reshape(err, lead + (-1,)))
+        if gauge_mean is not None:
+            mean = theta[..., radius].mean(axis=-1, keepdims=True)
+            parts.append(_GAUGE_WEIGHT * (mean / gauge_mean - 1.0))
+        return np.concatenate(parts, axis=-1)
+
+    return fun, scale
+
+
+def jacobian(fun, z: np.ndarray, step: float = 1e-6) -> np.ndarray:
+    """Central-difference Jacobian of ``fun`` at ``z`` (normalised
+    parameters), all columns in one batched call."""
+    p = len(z)
+    plus_minus = z + step * np.vstack((np.eye(p), -np.eye(p)))
+    values = fun(plus_minus)
+    return ((values[:p] - values[p:]) / (2 * step)).T
+
+
+def calibrate(model, samples: Samples, reference: str = "none",
+              distance: float | None = None, iterations: int = 30) -> CalibrationResult:
+    """Estimate the family's parameters from ``samples``.
+
+    ``reference``: "ground_truth" (``samples.reference`` must be set) fixes
+    the scale from the true motion; "distance" scales radii and caster
+    offsets so that the odometry's straight-line displacement from the first
+    to the last sample is ``distance`` [m] (measured by the user); "none" keeps the configured
+    mean radius. Raises :class:`CalibrationError` (one line naming the
+    missing motion) when the samples cannot determine the parameters.
+    """
+    if reference not in ("none", "ground_truth", "distance"):
+        raise ValueError(f"reference must be none, ground_truth or distance, got {reference!r}")
+    family = family_for(model)
+    check_motion(family, samples)
+    use_ref = reference == "ground_truth"
+    if use_ref and samples.reference is None:
+        raise CalibrationError("--reference ground_truth needs ground_truth/odom in the "
+                               "recording (simulator runs publish it)")
+    if not family.self_consistent and not use_ref:
+        raise CalibrationError(
+            f"a {model.kind} has no redundant joint, so driving alone cannot show a wrong "
+            "parameter: calibrate against --reference ground_truth")
+    radius = np.array([k == "radius" for k in family.kinds])
+    gauge = None if use_ref else float(family.nominal[radius].mean())
+    if reference == "distance":
+        if distance is None or not distance > 0:
+            raise CalibrationError("--distance must be a measured distance > 0 [m]")
+    fun, scale = residual_function(family, samples, use_ref, gauge)
+
+    z = np.zeros(len(family.nominal))
+    r = fun(z)
+    cost = float(r @ r)
+    lam = 1e-3
+    for _ in range(iterations):
+        J = jacobian(fun, z)
+        A, g = J.T @ J, J.T @ r
+        improved = False
+        for _ in range(10):
+            step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -g)
+            r_new = fun(z + step)
+            cost_new = float(r_new @ r_new)
+            if cost_new < cost:
+                z, r, cost, improved = z + step, r_new, cost_new, True
+                lam = max(lam / 10, 1e-9)
+                break
+            lam *= 10
+        if not improved or np.max(np.abs(step)) < 1e-9:
+            break
+    J = jacobian(fun, z)
+    m = len(r) - (1 if gauge is not None else 0)
+    dof = max(m - len(z) + (1 if gauge is not None else 0), 1)
+    body_r = r[:m]
+    sigma2 = float(body_r @ body_r) / dof
+    info = J.T @ J
+    weak = weakest_direction(family, info, sigma2)
+    if weak is not None:
+        raise CalibrationError(weak + " (" + missing_motion(family, samples) + ")")
+    cov = np.linalg.inv(info) * sigma2
+    theta = family.nominal + scale * z
+    stderr = scale * np.sqrt(np.maximum(np.diag(cov), 0.0))
+    result = CalibrationResult(family, theta, stderr, math.sqrt(sigma2), len(samples),
+                               reference)
+    if reference == "distance":
+        _scale_to_distance(result, samples, distance)
+    elif reference == "none" and family.self_consistent:
+        result.notes.append("overall scale not observed: the mean wheel radius is kept as "
+                            "configured (give --distance or --reference ground_truth)")
+    return result
+
+
+def _scale_to_distance(result: CalibrationResult, samples: Samples, distance: float) -> None:
+    """Scale radii and caster offsets together -- the direction the joints
+    cannot see -- so that the odometry spans the measured ``distance`` [m]
+    from the first to the last sample; the root nearest the configured
+    scale, found on a 0.1 % grid over +-10 % and refined linearly."""
+    fam = result.family
+    lengths = np.array([k in ("radius", "offset") for k in fam.kinds])
+    factors = np.linspace(0.9, 1.1, 201)
+    thetas = np.where(lengths, result.theta * factors[:, None], result.theta)
+    spans = np.linalg.norm(end_point(fam, thetas, samples), axis=-1)
+    if spans.max() < 0.5:
+        raise CalibrationError(f"--distance needs a run whose end is at least 0.5 m from its "
+                               f"start (this one: {spans.max():.2f} m by odometry)")
+    miss = spans - distance
+    roots = [factors[i] - miss[i] * (factors[i + 1] - factors[i]) / (miss[i + 1] - miss[i])
+             for i in range(len(factors) - 1) if miss[i] * miss[i + 1] <= 0 and
+             miss[i] != miss[i + 1]]
+    if not roots:
+        raise CalibrationError(f"the measured distance {distance:g} m is more than 10 % away "
+                               f"from the odometry's {spans[100]:.3f} m: check the "
+                               "measurement and the recording's start and end")
+    k = float(min(roots, key=lambda f: abs(f - 1.0)))
+    result.theta[lengths] *= k
+    result.stderr[lengths] *= k
+    result.notes.append(f"scale from --distance {distance:g} m: radii and caster offsets "
+                        f"x {k:.5f}")
+
+
+#: largest acceptable standard error before the recording counts as not
+#: exciting a parameter: relative for lengths, radians for zeros
+MAX_STDERR = {"radius": 0.005, "offset": 0.1, "length": 0.005, "zero": math.radians(1.0)}
+#: eigenvalue ratio (in units of MAX_STDERR) below which a direction is unobservable
+_MIN_CONDITION = 1e-12
+
+
+def weakest_direction(family, info: np.ndarray, sigma2: float) -> str | None:
+    """None when the information matrix ``info`` (normalised parameters)
+    determines every parameter to within MAX_STDERR; else a phrase naming the
+    parameters the data leaves (nearly) free."""
+    tol = np.array([MAX_STDERR[k] for k in family.kinds])
+    vals, vecs = np.linalg.eigh(tol[:, None] * info * tol[None, :])
+    if not vals[-1] > 0:
+        return "no usable motion in the recording"
+    singular = vals[0] / vals[-1] < _MIN_CONDITION
+    se = np.sqrt(np.maximum(np.diag(np.linalg.pinv(info)), 0.0) * sigma2)
+    loose = se > tol
+    if not singular and not loose.any():
+        return None
+    if singular:
+        weight = np.abs(vecs[:, 0])
+        idx = [i for i in np.argsort(-weight)[:3] if weight[i] > 0.3 * weight.max()]
+    else:
+        idx = list(np.flatnonzero(loose))[:3]
+    return "not enough excitation: " + ", ".join(family.labels[i] for i in idx) + \
+        " undetermined"
+
+
+def motion_summary(family, samples: Samples) -> dict[str, float]:
+    """Moving time [s], path [m], turn [rad] and the spread of travel
+    directions in base_link [rad], from the configured model."""
+    body = family.body(family.nominal, samples)
+    dt = np.maximum(samples.durations, 1e-6)
+    speed = np.hypot(body[:, 0], body[:, 1]) / dt
+    turn = np.abs(body[:, 2]) / dt
+    moving = (speed > _STILL_SPEED) | (turn > _STILL_TURN)
+    heading = np.arctan2(body[:, 1], body[:, 0])[speed > 0.1]
+    # the spread of directions modulo 180 deg (driving back and forth is one
+    # direction): 1 - |mean of exp(2 i psi)| is 0 for one direction, 1 for all
+    spread = float(1.0 - abs(np.mean(np.exp(2j * heading)))) if len(heading) else 0.0
+    return {"moving_s": float(dt[moving].sum()),
+            "path_m": float(np.hypot(body[:, 0], body[:, 1]).sum()),
+            "turn_rad": float(np.abs(body[:, 2]).sum()),
+            "turning_share": float(np.mean(turn[moving] > 0.2)) if moving.any() else 0.0,
+            "direction_spread": spread}
+
+
+#: a usable recording has at least this much motion
+MIN_MOVING_S, MIN_PATH_M, MIN_TURN_RAD = 20.0, 5.0, 2 * math.pi
+
+
+def check_motion(family, samples: Samples) -> None:
+    """Reject a recording that is too short before fitting anything."""
+    if len(samples) < 10:
+        raise CalibrationError(f"too short: {len(samples)} moving samples (drive for about two "
+                               "minutes: forward, sideways, diagonally, turning)")
+    m = motion_summary(family, samples)
+    if m["moving_s"] < MIN_MOVING_S or m["path_m"] < MIN_PATH_M:
+        raise CalibrationError(
+            f"too short: {m['moving_s']:.0f} s and {m['path_m']:.1f} m of motion (drive at "
+            f"least {MIN_MOVING_S:.0f} s and {MIN_PATH_M:.0f} m; about two minutes is best)")
+
+
+def missing_motion(family, samples: Samples) -> str:
+    """What motion the recording lacks, for the excitation error."""
+    m = motion_summary(family, samples)
+    if m["turn_rad"] < MIN_TURN_RAD or m["turning_share"] < 0.1:
+        if m["direction_spread"] < 0.2:
+            return "only straight lines: drive with rotation and sideways"
+        return "hardly any rotation: turn while driving and spin in place"
+    if m["direction_spread"] < 0.2:
+        return "one direction of travel only: drive sideways and diagonally too"
+    return "drive longer, with more changes of direction and rotation"

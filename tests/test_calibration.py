@@ -1,0 +1,193 @@
+"""Self-calibration (holonomic_core.calibration, the drift watch, the overlay):
+the math against synthetic joint data generated with a *different* geometry
+than the configured one, so the expected estimate is that geometry exactly."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from holonomic_core.calibration import (CalibrationError, calibrate, family_for,
+                                        samples_from_readings)
+from holonomic_core.drift_watch import DriftWatch
+from holonomic_core.model import load_model, read_params_file
+
+
+def _pcv_truth():
+    """xr4000 with each caster changed: radii +-1.5 % around the same mean
+    (the scale is held without a reference), offsets +-10 %, zeros +-3 deg."""
+    nominal = load_model("xr4000")
+    names = nominal.kinematics.caster_names
+    dr = np.array([0.015, -0.01, 0.005, -0.01])          # sums to 0: mean radius kept
+    db = np.array([0.1, -0.05, 0.08, -0.1])
+    zeros = np.radians([3.0, -2.0, 1.0, -2.5])
+    truth = {}
+    for i, n in enumerate(names):
+        truth[f"pcv.{n}.wheel_radius"] = 0.055 * (1 + dr[i])
+        truth[f"pcv.{n}.caster_offset"] = 0.02 * (1 + db[i])
+        # the encoder reads angle + zeros[i]: the correction is -zeros[i]
+        truth[f"joints.{n}_steer_joint.zero_correction"] = -float(zeros[i])
+    return nominal, truth
+
+
+def _drive(model, twists, dt=0.005, zeros=None):
+    """Joint readings of a rigid, slip-free base moving with ``twists`` (one
+    per step [m/s, m/s, rad/s]) under ``model``'s true geometry: the joint
+    rates are its exact inverse kinematics; the encoders add ``zeros``.
+    Returns (stamps, raw readings, true poses in odom)."""
+    q = np.zeros(len(model.joint_names))
+    pose = np.zeros(3)
+    stamps, readings, poses = [], [], []
+    for k, twist in enumerate(twists):
+        stamps.append(k * dt)
+        readings.append(q + (0.0 if zeros is None else zeros))
+        poses.append(pose.copy())
+        # midpoint steps: joint rates at the half-step configuration
+        half = q + 0.5 * dt * model.inverse(q, twist)
+        q = q + dt * model.inverse(half, twist)
+        c, s = math.cos(pose[2] + 0.5 * dt * twist[2]), math.sin(pose[2] + 0.5 * dt * twist[2])
+        pose += dt * np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1],
+                               twist[2]])
+    return np.array(stamps), np.array(readings), np.array(poses)
+
+
+def _teleop(seconds, dt=0.005, seed=0, rotation=True, sideways=True):
+    """Smooth random twists: a new target every second, first-order approach."""
+    rng = np.random.default_rng(seed)
+    out, twist, target = [], np.zeros(3), np.zeros(3)
+    for k in range(int(seconds / dt)):
+        if k % int(1.0 / dt) == 0:
+            target = rng.uniform(-1, 1, 3) * (0.6, 0.6 if sideways else 0.0,
+                                              1.2 if rotation else 0.0)
+        twist = twist + (target - twist) * dt / 0.3
+        out.append(twist.copy())
+    return out
+
+
+def test_pcv_joint_data_of_another_geometry_gives_that_geometry_back():
+    nominal, truth = _pcv_truth()
+    true_model = load_model("xr4000", {k: v for k, v in truth.items() if k.startswith("pcv.")})
+    zeros = np.zeros(len(nominal.joint_names))
+    zeros[0::2] = [-truth[f"joints.{n}_steer_joint.zero_correction"]
+                   for n in nominal.kinematics.caster_names]
+    stamps, raw, _ = _drive(true_model, _teleop(40.0), zeros=zeros)
+    # the configured model has no zeros: the controller hands the raw readings
+    # on; every 5 ms reading is a sample, so that the steering transients
+    # (unlimited here) are resolved
+    result = calibrate(nominal, samples_from_readings(stamps, raw, period=0.005), "none")
+    est = result.overlay()
+    for key, value in truth.items():
+        # slip-free data: only the 5 ms chords' discretisation separates the
+        # fit from the truth (measured: radii 1e-6, offsets 1.1e-3 relative,
+        # zeros 0.0012 deg; with 20 ms samples the offsets' error is 0.5 %)
+        tol = (math.radians(0.005) if "zero_correction" in key else
+               3e-3 * value if "caster_offset" in key else 1e-5 * value)
+        assert est[key] == pytest.approx(value, abs=tol), key
+    assert result.rms_residual < 1e-6          # [m] per sample: nothing left to explain
+
+
+def test_pcv_reference_fixes_the_scale_the_joints_cannot_see():
+    nominal = load_model("xr4000")
+    # every radius 1.5 % larger: the joints alone stay consistent
+    true_model = load_model("xr4000", {"pcv.wheel_radius": 0.055 * 1.015})
+    stamps, raw, poses = _drive(true_model, _teleop(30.0, seed=1))
+    no_ref = calibrate(nominal, samples_from_readings(stamps, raw), "none").overlay()
+    assert no_ref["pcv.front_left.wheel_radius"] == pytest.approx(0.055, rel=2e-4)
+    with_ref = calibrate(nominal, samples_from_readings(stamps, raw, poses),
+                         "ground_truth").overlay()
+    for name in nominal.kinematics.caster_names:
+        assert with_ref[f"pcv.{name}.wheel_radius"] == pytest.approx(0.055 * 1.015, rel=2e-4)
+
+
+def test_measured_distance_scales_the_radii():
+    nominal = load_model("comr3")
+    true_model = load_model("comr3", {"pcv.wheel_radius": 0.04 * 0.98})
+    # the run ends at rest, where the user measures
+    stamps, raw, poses = _drive(true_model, _teleop(30.0, seed=2) + [np.zeros(3)] * 40)
+    span = float(np.hypot(*(poses[-1, :2] - poses[0, :2])))
+    result = calibrate(nominal, samples_from_readings(stamps, raw), "distance", distance=span)
+    # the joints fix everything but the common scale of radii and offsets;
+    # the span fixes that: r = 0.98 * 0.04 and b = 0.03 exactly
+    est = result.overlay()
+    for name in ("c1", "c2", "c3"):
+        assert est[f"pcv.{name}.wheel_radius"] == pytest.approx(0.04 * 0.98, rel=5e-4)
+        assert est[f"pcv.{name}.caster_offset"] == pytest.approx(0.03, rel=5e-3)
+
+
+def test_ddrot_is_calibrated_against_the_reference():
+    nominal = load_model("hamr")
+    truth = {"ddrot.left_wheel_radius": 0.0615 * 0.985, "ddrot.right_wheel_radius": 0.0615 * 1.01,
+             "ddrot.half_wheel_separation": 0.1641 * 1.02}
+    true_model = load_model("hamr", truth)
+    zeros = np.array([0.0, 0.0, math.radians(2.0)])
+    stamps, raw, poses = _drive(true_model, _teleop(30.0, seed=3), zeros=zeros)
+    samples = samples_from_readings(stamps, raw, poses)
+    est = calibrate(nominal, samples, "ground_truth").overlay()
+    for key, value in truth.items():
+        assert est[key] == pytest.approx(value, rel=2e-4), key
+    assert est["joints.turret_joint.zero_correction"] == pytest.approx(-math.radians(2.0),
+                                                                       abs=math.radians(0.01))
+    with pytest.raises(CalibrationError, match="no redundant joint.*ground_truth"):
+        calibrate(nominal, samples_from_readings(stamps, raw), "none")
+
+
+def test_straight_lines_only_are_rejected_with_what_motion_is_missing():
+    model = load_model("xr4000")
+    stamps, raw, _ = _drive(model, _teleop(60.0, seed=4, rotation=False, sideways=False))
+    with pytest.raises(CalibrationError, match="only straight lines: drive with rotation and "
+                                               "sideways"):
+        calibrate(model, samples_from_readings(stamps, raw), "none")
+
+
+def test_a_short_recording_is_rejected():
+    model = load_model("xr4000")
+    stamps, raw, _ = _drive(model, _teleop(5.0, seed=5))
+    with pytest.raises(CalibrationError, match="too short"):
+        calibrate(model, samples_from_readings(stamps, raw), "none")
+
+
+def test_drift_watch_names_the_caster_and_the_parameter():
+    nominal = load_model("xr4000")
+    # front_left 2 % larger, rear_left 2 % smaller: the mean stays
+    true_model = load_model("xr4000", {"pcv.front_left.wheel_radius": 0.055 * 1.02,
+                                       "pcv.rear_left.wheel_radius": 0.055 * 0.98})
+    stamps, raw, _ = _drive(true_model, _teleop(60.0, seed=6))
+    for model, expect in ((nominal, True), (true_model, False)):
+        watch = DriftWatch(model, window=20.0)
+        for stamp, q in zip(stamps, raw):
+            watch.update(stamp, q)
+        findings = watch.findings()
+        if expect:
+            assert findings[0].startswith("caster ") and "run holonomic-calibrate" in findings[0]
+            assert any(f.startswith("caster front_left: wheel radius looks 2.0 % larger")
+                       for f in findings), findings
+            assert any(f.startswith("caster rear_left: wheel radius looks 2.0 % smaller")
+                       for f in findings), findings
+        else:
+            assert findings == [], findings
+
+
+def test_overlay_is_a_params_file_that_changes_the_model(tmp_path):
+    import yaml
+    from holonomic_bringup.calibrate import overlay_document
+    from holonomic_core.controller import load_config
+    overlay = {"pcv.front_left.wheel_radius": 0.0561,
+               "pcv.rear_right.caster_offset": 0.021,
+               "joints.front_right_steer_joint.zero_correction": 0.05}
+    path = tmp_path / "overlay.yaml"
+    path.write_text(yaml.safe_dump(overlay_document(overlay)))
+    flat = read_params_file(path)
+    assert flat == pytest.approx(overlay)
+    cfg = load_config("xr4000", flat)
+    kin = cfg.model.kinematics
+    assert kin.r[0] == 0.0561 and kin.b[2] == 0.021
+    assert cfg.model.zero_corrections[6] == 0.05
+
+
+def test_family_parameters_are_the_config_keys():
+    fam = family_for(load_model("comr3"))
+    assert fam.keys[:3] == ("pcv.c1.wheel_radius", "pcv.c2.wheel_radius", "pcv.c3.wheel_radius")
+    assert fam.keys[-1] == "joints.c3_steer_joint.zero_correction"
+    assert list(fam.nominal[:6]) == [0.04] * 3 + [0.03] * 3
