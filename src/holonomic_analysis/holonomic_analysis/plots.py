@@ -148,11 +148,15 @@ def measured_plot(measurement, title: str, path: Path) -> Path:
     """Move time against direction, one curve per heading change (polar)."""
     fig = plt.figure(figsize=(6, 6))
     ax = fig.add_subplot(projection="polar")
-    for theta in measurement.thetas:
+    # ±90 deg give the same times on a symmetric base: a style per curve
+    # keeps a curve drawn over another visible
+    styles = [("-", "o", 6), ("--", "s", 5), (":", "^", 5), ("-.", "D", 4)]
+    for k, theta in enumerate(measurement.thetas):
         moves = [m for m in measurement.moves if m.theta == theta]
         a = [m.alpha for m in moves] + [moves[0].alpha]
         t = [m.seconds for m in moves] + [moves[0].seconds]
-        ax.plot(a, t, marker="o",
+        line, marker, size = styles[k % len(styles)]
+        ax.plot(a, t, linestyle=line, marker=marker, markersize=size,
                 label=f"heading change {math.degrees(theta):g} deg: "
                       f"H = {measurement.h_of(theta):.2f}")
     ax.set_title(f"{title}\ntime [s] to move d_T = {measurement.distance:g} m, by direction",
