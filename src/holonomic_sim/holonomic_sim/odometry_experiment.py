@@ -16,7 +16,10 @@ This reproduces it with the real control stack (``BaseController`` and the
   heading, rad), over ``--seeds`` seeds x the slip conditions.
 
 Prints a table (mean and median per estimator and condition, and the ratios
-to ``pinv``) and, with ``--json``, writes every trial.
+to ``pinv``) and, with ``--json``, writes every trial. With ``--calibrate``
+the same runs calibrate the odometry covariance against ground truth
+(:mod:`holonomic_sim.odometry_calibration`); ``--check`` only reports the
+coverage of the config's own covariance.
 """
 
 from __future__ import annotations
