@@ -102,9 +102,21 @@ def test_nan_commands_never_move_the_base_and_stop_a_moving_one(hamr):
     hamr.drive((0.5, 0.0, 0.0), 1.5)
     hamr.publish(math.nan, 0.0, 0.0)
     t_nan = time.monotonic()
-    wait_until(lambda: np.linalg.norm(hamr.latest_truth().twist) < 0.01, 2.0,
+    at_nan = hamr.latest_truth().pose
+    wait_until(lambda: np.linalg.norm(hamr.latest_truth().twist) < 0.01, 3.0,
                "the base to stop after a NaN command")
-    assert time.monotonic() - t_nan < 0.5 + 0.5  # < cmd_timeout + decel time
+    # Braking starts at the next cycle: 0.5 m/s at 2.0 m/s^2 (hamr.yaml) is
+    # 0.25 s, measured 0.29 s from the publish to a ground truth at rest. A
+    # base that dropped the NaN but kept the last good command would only
+    # stop after cmd_timeout + braking = 0.5 + 0.25 s (measured 0.73 s), so
+    # anything under cmd_timeout proves the NaN itself stopped it.
+    stop_time = time.monotonic() - t_nan
+    assert stop_time < 0.5, stop_time
+    # the same in distance (free of the machine's load): braking from 0.5 m/s
+    # at 2.0 m/s^2 covers 0.5^2 / (2 * 2.0) = 0.06 m; holding the last good
+    # command until the timeout would add 0.5 m/s * 0.5 s = 0.25 m
+    braked = np.linalg.norm(hamr.latest_truth().pose[:2] - at_nan[:2])
+    assert braked < 0.15, braked
 
 
 def test_disarmed_base_ignores_cmd_vel_and_rearms(hamr):

@@ -7,6 +7,7 @@ import pytest
 from holonomic_core.controller import ControllerState
 from holonomic_core.driver import JointReading
 from holonomic_core.mock_driver import MockDriver
+from holonomic_core.monitor import MonitorLimits, ReadingMonitor
 
 from test_controller_core import arm, make, run
 
@@ -127,3 +128,40 @@ def test_a_long_loop_stall_integrates_the_motion_without_a_fault(moving):
     assert ctrl.state is ControllerState.ARMED
     assert np.linalg.norm(ctrl.odometry.pose[:2] - pose[:2]) == pytest.approx(
         0.4 * (0.2 + ctrl.dt), rel=0.05)
+
+
+def test_samples_bunched_by_a_loop_stall_are_motion_not_a_glitch():
+    """A control loop that stalls 100 ms, then runs its catch-up cycle 0.7 ms
+    later (ControlLoop does one at once after an overrun). A drive's sample
+    taken at the last SYNC before the stall is handled late, after the next
+    SYNC, so the host stamps it with that SYNC; the next sample, 0.7 ms of
+    stamps later, carries the whole stall's motion. On a real bus under load
+    (the CiA 402 rig with two busy CPUs beside it) this was a false "encoder
+    glitch: position jumped by 0.21 rad in 0.7 ms" that stopped the base."""
+    period, speed = 0.005, 10.0                     # one joint at half its 20 rad/s limit
+    monitor = ReadingMonitor(["wheel"], [20.0], period, MonitorLimits())
+
+    def check(now, stamp, sampled_at):
+        return monitor.check(JointReading(stamp, [speed * sampled_at], [speed], []), now)
+
+    for k in range(10):                             # steady 200 Hz, stamps on time
+        assert check(k * period, k * period, k * period) is None
+    last = 9 * period
+    # the stall: the sample of t = last is stamped with the SYNC after the stall
+    assert check(last + 0.1, last + 0.1, last) is None
+    # catch-up cycle 0.7 ms later: 10 rad/s * 0.1 s = 1 rad "in 0.7 ms", over
+    # the period's bound of 3 * 20 rad/s * 5 ms = 0.3 rad, within the stall's
+    # 3 * 20 * 0.1 = 6 rad
+    assert check(last + 0.1007, last + 0.1007, last + 0.1) is None
+    # a real glitch right after the stall is still one (50 rad > 6 rad) ...
+    glitch = monitor.check(JointReading(last + 0.1057, [50.0], [speed], []), last + 0.1057)
+    assert glitch is not None and "position jumped" in glitch
+    # ... and after STALL_MEMORY steady cycles the bound is the period's again:
+    # a 1 rad jump in 5 ms (0.3 rad bound) is a glitch
+    t = last + 0.1057
+    for _ in range(ReadingMonitor.STALL_MEMORY):
+        t += period
+        assert check(t, t, t) is None
+    t += period
+    jumped = monitor.check(JointReading(t, [speed * t + 1.0], [speed], []), t)
+    assert jumped is not None and "position jumped by 1.05 rad" in jumped
