@@ -18,7 +18,7 @@ HEADER = """\
 # ros-jazzy-rmw-fastrtps-cpp, ros-jazzy-rosgraph-msgs, ros-jazzy-std-srvs, the
 # rosidl generators and ament_cmake (to build tf2_msgs), numpy, pybullet,
 # pyyaml, matplotlib, python-can, canopen, mcap, mcap-ros2-support,
-# colcon-common-extensions, pytest and hypothesis."""
+# colcon-common-extensions, pytest, hypothesis and mutmut (make mutation)."""
 
 pins = {}
 for dist in md.distributions():

@@ -208,15 +208,42 @@ def test_cia402_driver_sends_the_scripted_frames():
         frames = rig.sniff()
         nmt = [bytes(m.data) for m in frames if m.arbitration_id == 0]
         assert nmt == [H("80 01"), H("80 02"), H("80 03"), H("01 01"), H("01 02"), H("01 03")]
-        expected = [co.sdo_upload_request(0x1000, 0),
-                    co.sdo_download_request(0x1017, 0, struct.pack("<H", 50)),
-                    # consumer: master 127 << 16 | 250 ms
-                    co.sdo_download_request(0x1016, 1, H("fa 00 7f 00")),
-                    co.sdo_download_request(0x6060, 0, H("09")),
-                    co.sdo_download_request(0x60FF, 0, bytes(4))]
-        expected += [co.sdo_download_request(i, s, d) for i, s, d in pdo_configuration(2)]
-        expected += [co.sdo_upload_request(0x6061, 0), co.sdo_upload_request(0x6502, 0),
-                     co.sdo_upload_request(0x6076, 0)]
+        # Written by hand from CiA 301 (not with the codec under test): an
+        # expedited SDO download is 0x23 / 0x2B / 0x2F for 4 / 2 / 1 data
+        # bytes (ccs 1, e = s = 1, n = 4 - size), then index (LE), subindex,
+        # data padded to 4; an upload request is 0x40, index, subindex, 0s.
+        # PDO set-up per PDO: COB-ID with bit 31 (invalid), transmission
+        # type 1 (every SYNC), mapping count 0, entries (index << 16 |
+        # subindex << 8 | bits), count, COB-ID valid. Node 2: RPDO1 0x202,
+        # RPDO2 0x302, TPDO1 0x182, TPDO2 0x282.
+        expected = [H(x) for x in (
+            "40 00 10 00 00 00 00 00",      # read 0x1000 device type
+            "2b 17 10 00 32 00 00 00",      # 0x1017 producer heartbeat 50 ms
+            "23 16 10 01 fa 00 7f 00",      # 0x1016.1 consumer: master 127, 250 ms
+            "2f 60 60 00 09 00 00 00",      # 0x6060 mode 9: cyclic synchronous velocity
+            "23 ff 60 00 00 00 00 00",      # 0x60FF target velocity 0
+            # RPDO1 (0x1400 / 0x1600): controlword 0x6040 16 bits, target velocity 0x60FF 32
+            "23 00 14 01 02 02 00 80", "2f 00 14 02 01 00 00 00", "2f 00 16 00 00 00 00 00",
+            "23 00 16 01 10 00 40 60", "23 00 16 02 20 00 ff 60", "2f 00 16 00 02 00 00 00",
+            "23 00 14 01 02 02 00 00",
+            # RPDO2 (0x1401 / 0x1601): controlword, target torque 0x6071 16, mode 0x6060 8
+            "23 01 14 01 02 03 00 80", "2f 01 14 02 01 00 00 00", "2f 01 16 00 00 00 00 00",
+            "23 01 16 01 10 00 40 60", "23 01 16 02 10 00 71 60", "23 01 16 03 08 00 60 60",
+            "2f 01 16 00 03 00 00 00", "23 01 14 01 02 03 00 00",
+            # TPDO1 (0x1800 / 0x1A00): position actual 0x6064 32, velocity actual 0x606C 32
+            "23 00 18 01 82 01 00 80", "2f 00 18 02 01 00 00 00", "2f 00 1a 00 00 00 00 00",
+            "23 00 1a 01 20 00 64 60", "23 00 1a 02 20 00 6c 60", "2f 00 1a 00 02 00 00 00",
+            "23 00 18 01 82 01 00 00",
+            # TPDO2 (0x1801 / 0x1A01): statusword 0x6041 16, error code 0x603F 16
+            "23 01 18 01 82 02 00 80", "2f 01 18 02 01 00 00 00", "2f 01 1a 00 00 00 00 00",
+            "23 01 1a 01 10 00 41 60", "23 01 1a 02 10 00 3f 60", "2f 01 1a 00 02 00 00 00",
+            "23 01 18 01 82 02 00 00",
+            # RPDO3/4 (0x402, 0x502) and TPDO3/4 (0x382, 0x482) invalid
+            "23 02 14 01 02 04 00 80", "23 03 14 01 02 05 00 80",
+            "23 02 18 01 82 03 00 80", "23 03 18 01 82 04 00 80",
+            "40 61 60 00 00 00 00 00",      # read 0x6061 mode display
+            "40 02 65 00 00 00 00 00",      # read 0x6502 supported drive modes
+            "40 76 60 00 00 00 00 00")]     # read 0x6076 rated torque
         assert _sdo_requests(frames, 2) == expected
 
         rig.driver.activate()
