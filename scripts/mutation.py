@@ -95,8 +95,7 @@ def run_module(work: Path, name: str, out: Path) -> dict[str, int]:
     counts = {v: 0 for v in STATUS.values()}
     for _, status in rows:
         counts[STATUS[status]] += 1
-    survivors = [mid for mid, status in rows if status in ("bad_survived", "untested",
-                                                          "skipped")]
+    survivors = [mid for mid, status in rows if status == "bad_survived"]
     with open(out / f"{name}.txt", "w") as handle:
         handle.write(f"{name}: {path}\n{counts}\n\n")
         for mid in survivors:
@@ -120,16 +119,20 @@ def main(argv=None) -> int:
     out = ROOT / "out" / "mutation"
     out.mkdir(parents=True, exist_ok=True)
     work = scratch_copy()
+    # killed: a test failed ("suspicious": failed, but slowly); timeout: the
+    # tests hung (a mutant that loops forever); not run: interrupted
     print(f"{'module':<16} {'mutants':>7} {'killed':>6} {'timeout':>7} {'survived':>8} "
-          f"{'score':>6} {'time':>6}")
+          f"{'not run':>7} {'score':>6} {'time':>6}")
     try:
         for name in args.modules:
             c = run_module(work, name, out)
-            total = sum(c[k] for k in STATUS.values())
-            caught = c["killed"] + c["timeout"]
-            score = 100.0 * caught / total if total else 100.0
-            print(f"{name:<16} {total:>7} {c['killed']:>6} {c['timeout']:>7} "
-                  f"{total - caught:>8} {score:>5.1f}% {c['seconds']:>5}s", flush=True)
+            caught = c["killed"] + c["suspicious"] + c["timeout"]
+            tested = caught + c["survived"]
+            score = 100.0 * caught / tested if tested else 100.0
+            print(f"{name:<16} {tested + c['untested'] + c['skipped']:>7} "
+                  f"{c['killed'] + c['suspicious']:>6} {c['timeout']:>7} {c['survived']:>8} "
+                  f"{c['untested'] + c['skipped']:>7} {score:>5.1f}% {c['seconds']:>5}s",
+                  flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     print(f"surviving mutants: {out}/<module>.txt")

@@ -13,6 +13,7 @@ import gc
 import itertools
 import os
 import struct
+import sys
 import threading
 import time
 
@@ -40,6 +41,13 @@ class CanRig:
         # own start-up objects for the same reason (base_controller_node.main).
         gc.collect()
         gc.freeze()
+        # ... and, like the node (base_controller_node.main), a short GIL
+        # switch interval: the loop, canopen's notifier and the emulated
+        # drives are threads of one process; with Python's default 5 ms a
+        # SYNC -> answer -> notifier round trip can wait tens of ms for the
+        # GIL on a busy machine and trip the 50 ms feedback timeout.
+        self._switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(5e-4)
         self.backend = backend
         self.channel = unique_channel(backend)
         params = {"driver": backend, f"{backend}.interface": "virtual",
@@ -137,6 +145,7 @@ class CanRig:
             for device in self.devices:
                 device.close()
             self.sniffer.shutdown()
+            sys.setswitchinterval(self._switch_interval)
 
     # -- what the drives were told -----------------------------------------------------
     def velocity_setpoints(self, node: int, frames=None) -> list[tuple[float, float]]:

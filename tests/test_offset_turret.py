@@ -148,6 +148,26 @@ def test_invalid_geometry_is_rejected_naming_the_parameter(key, kwargs):
         OffsetTurretKinematics(**kwargs)
     assert err.value.key == key
     assert key in str(err.value)
+    # only a zero turret offset is explained as the loss of holonomy
+    assert ("not holonomic" in str(err.value)) == (key == "ddrot.turret_offset")
+
+
+def test_geometry_over_100_m_is_refused_by_the_schema():
+    from holonomic_core.controller import load_config
+    with pytest.raises(ConfigError) as err:
+        load_config("hamr", {"ddrot.wheel_radius": 100.5})
+    assert err.value.key == "ddrot.wheel_radius"
+
+
+def test_estimate_is_exact_with_an_empty_read_only_residual(kin):
+    q, rates = np.array([0.0, 0.0, 0.4]), np.array([3.0, -2.0, 1.0])
+    twist, residual = kin.estimate(q, rates)
+    np.testing.assert_allclose(twist, kin.forward(q, rates), atol=0)
+    # a square Jacobian leaves nothing to fit: no residual; the one empty
+    # array is shared by every call, so nobody may write into it
+    assert residual.shape == (0,) and not residual.flags.writeable
+    with pytest.raises(ValueError, match=r"^estimator must be one of \('slip_min'"):
+        kin.forward(q, rates, "kalman")
 
 
 def test_zero_turret_offset_in_a_config_file_is_rejected(tmp_path):
@@ -165,6 +185,7 @@ def load_model_path_text():
 
 def test_load_model_hamr_follows_the_contract():
     model = load_model("hamr")
+    assert model.kind == "ddrot" and OffsetTurretKinematics.kind == "ddrot"
     assert model.joint_names == ("left_wheel_joint", "right_wheel_joint", "turret_joint")
     kin = model.kinematics
     assert (kin.r, kin.a, kin.b) == (0.0615, 0.1641, 0.1641)
