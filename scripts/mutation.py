@@ -6,13 +6,13 @@ the tests do not notice "survives". The run happens in a scratch copy of
 config/, src/ and tests/ (mutmut edits the file it mutates in place), so the
 working tree is never left mutated, even when the run is interrupted.
 
-String mutations are off: mutmut turns "text" into "XXtextXX", and in these
-modules string literals are messages that the tests check by substring (a
-key or a name that matters fails with a KeyError or a lookup error whatever
-the mutation, and is covered by the name mutations of the code around it).
+Mutations of plain string literals are off: mutmut turns "text" into
+"XXtextXX", and in these modules such literals are mostly messages that the
+tests check by substring, or keys and names whose mutation fails with a
+KeyError anyway. (f-strings are still mutated.)
 
 Usage (from the repository, with ros2_ws/env.sh sourced; `make mutation`):
-    python scripts/mutation.py [MODULE ...]     # default: every module
+    python scripts/mutation.py [--budget MINUTES] [MODULE ...]   # default: every module
 Prints a table of killed / survived / timed out per module and writes the
 diff of every surviving mutant to out/mutation/<module>.txt.
 """
@@ -71,7 +71,23 @@ def scratch_copy() -> Path:
     return work
 
 
-def run_module(work: Path, name: str, out: Path) -> dict[str, int]:
+#: [s] without a new result, a mutmut run is taken as hung and stopped
+STALL = 600.0
+
+
+def _tested(cache: Path) -> int:
+    """Mutants with a result so far (0 before mutmut has written its cache)."""
+    if not cache.exists():
+        return 0
+    try:
+        with sqlite3.connect(cache, timeout=1.0) as db:
+            return db.execute("SELECT COUNT(*) FROM Mutant WHERE status != 'untested'"
+                              ).fetchone()[0]
+    except sqlite3.Error:
+        return -1
+
+
+def run_module(work: Path, name: str, out: Path, budget: float | None) -> dict[str, int]:
     path, tests = MODULES[name]
     cache = work / ".mutmut-cache"
     cache.unlink(missing_ok=True)
@@ -86,10 +102,24 @@ def run_module(work: Path, name: str, out: Path) -> dict[str, int]:
            "--runner", runner, "--tests-dir", "tests", "--disable-mutation-types", "string",
            "--simple-output", "--no-progress", "-b", "20"]
     started = time.monotonic()
-    proc = subprocess.run(cmd, cwd=work, env=env, capture_output=True, text=True)
+    log = open(out / f"{name}.log", "w")
+    proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=log, stderr=subprocess.STDOUT)
+    # mutmut 2 can hang when its test worker dies (seen on an overloaded
+    # machine); and a run may have to end by a deadline: stop it then, the
+    # mutants not run yet are reported as such
+    last_change, last_done = time.monotonic(), -1
+    while proc.poll() is None:
+        time.sleep(10.0)
+        done = _tested(cache)
+        if done != last_done:
+            last_change, last_done = time.monotonic(), done
+        over_budget = budget is not None and time.monotonic() - started > budget
+        if over_budget or time.monotonic() - last_change > STALL:
+            proc.terminate()
+            proc.wait()
+    log.close()
     if not cache.exists():
-        sys.stderr.write(proc.stdout[-3000:] + proc.stderr[-3000:])
-        raise SystemExit(f"mutation: mutmut failed on {name} (exit {proc.returncode})")
+        raise SystemExit(f"mutation: mutmut failed on {name} (see {out / name}.log)")
     with sqlite3.connect(cache) as db:
         rows = db.execute("SELECT Mutant.id, Mutant.status FROM Mutant").fetchall()
     counts = {v: 0 for v in STATUS.values()}
@@ -110,6 +140,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("modules", nargs="*", default=list(MODULES),
                         help=f"some of {', '.join(MODULES)}")
+    parser.add_argument("--budget", type=float, default=None, metavar="MINUTES",
+                        help="stop each module after this long (the rest: not run)")
     args = parser.parse_args(argv)
     unknown = [m for m in args.modules if m not in MODULES]
     if unknown:
@@ -125,7 +157,8 @@ def main(argv=None) -> int:
           f"{'not run':>7} {'score':>6} {'time':>6}")
     try:
         for name in args.modules:
-            c = run_module(work, name, out)
+            budget = None if args.budget is None else 60.0 * args.budget
+            c = run_module(work, name, out, budget)
             caught = c["killed"] + c["suspicious"] + c["timeout"]
             tested = caught + c["survived"]
             score = 100.0 * caught / tested if tested else 100.0
