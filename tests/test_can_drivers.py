@@ -359,3 +359,34 @@ def test_cia402_torque_mode_sends_rpdo2_with_cst_and_scaled_torque(rig_factory):
     assert rig.arm() == (True, "motors armed")
     assert all(d.get(co.MODES_OF_OPERATION) == 9 and d.get(co.TARGET_TORQUE) == 0
                for d in rig.devices)
+
+
+def test_cia402_sample_is_stamped_with_the_sync_it_answers_even_when_handled_late(rig_factory):
+    """A TPDO1 that arrived (bus timestamp) after SYNC A but is handled only
+    after SYNC B was sent -- the receiving thread starved -- holds what the
+    drive sampled at A: its reading is stamped with A, not B. (Stamped with
+    B, the next sample would seem to cover a whole stall in one cycle: a
+    false encoder glitch and a spike in the odometry's twist.)"""
+    rig = rig_factory("cia402", "hamr")
+    assert rig.arm() == (True, "motors armed")
+    rig.run(0.05)
+    rig.emulators.stop()                      # from here on, this test plays the drives
+    driver = rig.driver
+    wall_minus_clock = time.time() - time.monotonic()
+
+    def answer(arrived):
+        for node in rig.node_ids:
+            driver.on_frame(0x280 + node, struct.pack("<HH", 0x0237, 0), arrived)
+            driver.on_frame(0x180 + node, struct.pack("<ii", 1000, 0), arrived)
+
+    mark = len(rig.sniff())
+    driver.read()                             # ... and SYNC A
+    time.sleep(0.02)                          # the scenario: 20 ms between the SYNCs
+    driver.read()                             # ... and SYNC B
+    sync_a, sync_b = [m.timestamp for m in rig.sniff()[mark:] if m.arbitration_id == 0x080]
+    assert sync_b - sync_a >= 0.02
+    answer(sync_a + 1e-4)                     # A's answer, handled after B left
+    late = driver.read()
+    assert late.stamp == pytest.approx(sync_a - wall_minus_clock, abs=0.005)
+    answer(sync_b + 1e-4)
+    assert driver.read().stamp == pytest.approx(sync_b - wall_minus_clock, abs=0.005)

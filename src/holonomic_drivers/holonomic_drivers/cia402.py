@@ -41,6 +41,7 @@ import math
 import struct
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Callable
 
@@ -155,6 +156,8 @@ class Cia402Driver(CanDriver):
         self._nodes = []
         self._next_master_heartbeat = -math.inf
         self._sync_time = -math.inf
+        #: (wall clock, driver clock) [s] of the last SYNCs sent, newest last
+        self._syncs: deque[tuple[float, float]] = deque(maxlen=16)
         self.counters = {"bad_frames": 0, "emcy": 0, "syncs": 0, "frames_sent": 0}
 
     @classmethod
@@ -409,10 +412,14 @@ class Cia402Driver(CanDriver):
     # -- bus ---------------------------------------------------------------------------------
     def _cycle_frames(self, now: float) -> None:
         """SYNC every cycle (the drives sample and answer), master heartbeat when due."""
-        self._sync_time = now
         if now >= self._next_master_heartbeat:
             self._next_master_heartbeat = now + self._heartbeat_period
             self._send(co.HEARTBEAT + self._master_id, bytes([co.NmtState.OPERATIONAL]))
+        # both clocks as the SYNC leaves (the drives sample then)
+        sent = time.monotonic()
+        self._sync_time = sent
+        with self._lock:
+            self._syncs.append((time.time(), sent))
         self._send(co.SYNC, b"")
         self.counters["syncs"] += 1
 
@@ -478,24 +485,43 @@ class Cia402Driver(CanDriver):
             self._network = None
 
     # -- receive (canopen's notifier thread) ---------------------------------------------------
-    def on_frame(self, cob_id: int, data: bytes) -> None:
+    def on_frame(self, cob_id: int, data: bytes, timestamp: float | None = None) -> None:
+        """A frame from the bus; ``timestamp`` [s, wall clock]: when it arrived
+        (python-can's, from the kernel on socketcan), if known."""
         entry = self._cob.get(cob_id)
         if entry is None:
             return
         i, handler = entry
         try:
             with self._lock:
-                handler(self._drives[i], bytes(data), time.monotonic())
+                if handler == self._on_tpdo1:
+                    self._on_tpdo1(self._drives[i], bytes(data), time.monotonic(),
+                                   self._answered_sync(timestamp))
+                else:
+                    handler(self._drives[i], bytes(data), time.monotonic())
         except (struct.error, ValueError):
             self.counters["bad_frames"] += 1
 
-    def _on_tpdo1(self, d: _Drive, data: bytes, now: float) -> None:
+    def _answered_sync(self, arrived: float | None) -> float:
+        """Driver-clock time of the SYNC a TPDO that arrived at ``arrived``
+        [s, wall clock] answers: the last one sent before it arrived. (The
+        last SYNC sent *now* is wrong for an answer handled late -- this
+        thread starved, frames queued: that sample would be stamped a cycle
+        or a stall late, and the next one would seem to move that far in no
+        time.) Without an arrival time: the last SYNC sent."""
+        if arrived:
+            for wall, clock in reversed(self._syncs):
+                if wall <= arrived:
+                    return clock
+        return self._sync_time
+
+    def _on_tpdo1(self, d: _Drive, data: bytes, now: float, sampled: float) -> None:
         if len(data) != 8:
             raise ValueError("TPDO1 length")
         d.position, d.velocity = struct.unpack("<ii", data)
         d.feedback_time = now
-        # the drive sampled these at the SYNC they answer: the last one sent
-        d.sample_time = self._sync_time
+        # the drive sampled these at the SYNC they answer
+        d.sample_time = sampled
 
     def _on_tpdo2(self, d: _Drive, data: bytes, now: float) -> None:
         if len(data) != 4:
@@ -528,7 +554,7 @@ class _FrameListener(can.Listener):
             self._driver.counters["bad_frames"] += 1
             return
         if not msg.is_extended_id and not msg.is_remote_frame:
-            self._driver.on_frame(msg.arbitration_id, msg.data)
+            self._driver.on_frame(msg.arbitration_id, msg.data, msg.timestamp)
 
     def stop(self) -> None:
         pass

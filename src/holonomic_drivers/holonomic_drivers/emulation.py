@@ -39,7 +39,10 @@ class EmulatedDevice:
 
     def __init__(self, channel: str, max_acceleration: float):
         """``max_acceleration`` [motor rev/s^2] of the ideal motor."""
-        self.bus = can.Bus(interface="virtual", channel=channel)
+        # the device stamps what it sends (preserve_timestamps): a real drive
+        # answers a SYNC within a fraction of a millisecond, whenever this
+        # emulator's thread gets to run on a busy test machine
+        self.bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
         self.max_acceleration = float(max_acceleration)
         #: no frame at all leaves the device (unplugged, dead CPU)
         self.silent = False
@@ -79,9 +82,11 @@ class EmulatedDevice:
                                             self.max_acceleration * dt)
         self.position_rev += self.velocity_rev_per_s * dt
 
-    def send(self, arbitration_id: int, data: bytes) -> None:
+    def send(self, arbitration_id: int, data: bytes, at: float | None = None) -> None:
+        """Send a frame stamped ``at`` [s, wall clock] (default: now)."""
         self.bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                  is_extended_id=False))
+                                  is_extended_id=False,
+                                  timestamp=time.time() if at is None else at))
 
     def close(self) -> None:
         self.bus.shutdown()
@@ -346,7 +351,7 @@ class EmulatedCia402Drive(EmulatedDevice):
         if cob == co.NMT and len(data) == 2 and data[1] in (0, self.node_id):
             self._on_nmt(data[0])
         elif cob == co.SYNC:
-            self._on_sync()
+            self._on_sync(now)
         elif cob == co.SDO_RX + self.node_id and self.nmt != co.NmtState.STOPPED:
             if not self.sdo_silent:
                 self._on_sdo(data)
@@ -430,7 +435,11 @@ class EmulatedCia402Drive(EmulatedDevice):
             for (index, sub), value in values.items():
                 self._set(index, sub, value)
 
-    def _on_sync(self) -> None:
+    #: [s] from a SYNC to the drive's answer on the bus
+    ANSWER_DELAY = 1e-4
+
+    def _on_sync(self, at: float) -> None:
+        """The SYNC sent at ``at`` [s, wall clock]: apply the RPDOs, sample, answer."""
         pending, self._pending = self._pending, {}
         for (index, sub), value in pending.items():
             self._set(index, sub, value)
@@ -446,7 +455,7 @@ class EmulatedCia402Drive(EmulatedDevice):
                 continue
             payload = b"".join(struct.pack(self.od[(i, s)].fmt, self.od[(i, s)].value)
                                for i, s, _ in self._mapping(co.TPDO_MAP + k))
-            self.send(cob, payload)
+            self.send(cob, payload, at + self.ANSWER_DELAY)
 
     def _on_controlword(self, word: int) -> None:
         previous, self._previous_controlword = self._previous_controlword, word
