@@ -91,8 +91,10 @@ def run_module(work: Path, name: str, out: Path, budget: float | None) -> dict[s
     path, tests = MODULES[name]
     cache = work / ".mutmut-cache"
     cache.unlink(missing_ok=True)
+    # mutmut 2 counts only exit code 1 as "killed"; pytest exits 2 when a
+    # mutant breaks the import (collection error): any failure is a kill
     runner = " ".join([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
-                       *(f"'{t}'" if " " in t else t for t in tests)])
+                       *(f"'{t}'" if " " in t else t for t in tests)]) + " || exit 1"
     env = dict(os.environ)
     # the scratch copy's packages first (the workspace's would be the unmutated ones)
     packages = [str(p) for p in sorted((work / "src").iterdir()) if (p / p.name).is_dir()]

@@ -139,7 +139,8 @@ def test_samples_bunched_by_a_loop_stall_are_motion_not_a_glitch():
     (the CiA 402 rig with two busy CPUs beside it) this was a false "encoder
     glitch: position jumped by 0.21 rad in 0.7 ms" that stopped the base."""
     period, speed = 0.005, 10.0                     # one joint at half its 20 rad/s limit
-    monitor = ReadingMonitor(["wheel"], [20.0], period, MonitorLimits())
+    # the safety.* defaults of the controller's schema
+    monitor = ReadingMonitor(["wheel"], [20.0], period, MonitorLimits(3.0, 0.05, 0.3, 0.5))
 
     def check(now, stamp, sampled_at):
         return monitor.check(JointReading(stamp, [speed * sampled_at], [speed], []), now)
@@ -165,3 +166,9 @@ def test_samples_bunched_by_a_loop_stall_are_motion_not_a_glitch():
     t += period
     jumped = monitor.check(JointReading(t, [speed * t + 1.0], [speed], []), t)
     assert jumped is not None and "position jumped by 1.05 rad" in jumped
+
+
+def test_monitor_limits_cannot_change_under_a_running_monitor():
+    limits = MonitorLimits(3.0, 0.05, 0.3, 0.5)
+    with pytest.raises(AttributeError):
+        limits.velocity_factor = 100.0            # frozen: a config, not state

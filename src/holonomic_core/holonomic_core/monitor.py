@@ -32,10 +32,11 @@ class MonitorLimits:
     ``tracking_timeout`` [s]: ... for this long cannot follow (0 disables).
     """
 
-    velocity_factor: float = 3.0
-    reading_timeout: float = 0.05
-    tracking_error: float = 0.3
-    tracking_timeout: float = 0.5
+    # no defaults here: the controller's ParamSpec schema (safety.*) has them
+    velocity_factor: float
+    reading_timeout: float
+    tracking_error: float
+    tracking_timeout: float
 
 
 class ReadingMonitor:
