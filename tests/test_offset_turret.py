@@ -152,11 +152,13 @@ def test_invalid_geometry_is_rejected_naming_the_parameter(key, kwargs):
     assert ("not holonomic" in str(err.value)) == (key == "ddrot.turret_offset")
 
 
-def test_geometry_over_100_m_is_refused_by_the_schema():
+@pytest.mark.parametrize("key, value", [("ddrot.wheel_radius", 100.5),       # over 100 m
+                                        ("body.drive_base.mass", 0.0)])      # not > 0
+def test_geometry_out_of_range_is_refused_by_the_schema(key, value):
     from holonomic_core.controller import load_config
     with pytest.raises(ConfigError) as err:
-        load_config("hamr", {"ddrot.wheel_radius": 100.5})
-    assert err.value.key == "ddrot.wheel_radius"
+        load_config("hamr", {key: value})
+    assert err.value.key == key
 
 
 def test_estimate_is_exact_with_an_empty_read_only_residual(kin):
