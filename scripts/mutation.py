@@ -93,8 +93,9 @@ def run_module(work: Path, name: str, out: Path, budget: float | None) -> dict[s
     cache.unlink(missing_ok=True)
     # mutmut 2 counts only exit code 1 as "killed"; pytest exits 2 when a
     # mutant breaks the import (collection error): any failure is a kill
-    runner = " ".join([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
-                       *(f"'{t}'" if " " in t else t for t in tests)]) + " || exit 1"
+    pytest = " ".join([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+                       *(f"'{t}'" if " " in t else t for t in tests)])
+    runner = f'sh -c "{pytest} || exit 1"'       # (mutmut splits it for the baseline run)
     env = dict(os.environ)
     # the scratch copy's packages first (the workspace's would be the unmutated ones)
     packages = [str(p) for p in sorted((work / "src").iterdir()) if (p / p.name).is_dir()]
@@ -120,10 +121,12 @@ def run_module(work: Path, name: str, out: Path, budget: float | None) -> dict[s
             proc.terminate()
             proc.wait()
     log.close()
-    if not cache.exists():
+    rows = []
+    if cache.exists():
+        with sqlite3.connect(cache) as db:
+            rows = db.execute("SELECT Mutant.id, Mutant.status FROM Mutant").fetchall()
+    if not rows:
         raise SystemExit(f"mutation: mutmut failed on {name} (see {out / name}.log)")
-    with sqlite3.connect(cache) as db:
-        rows = db.execute("SELECT Mutant.id, Mutant.status FROM Mutant").fetchall()
     counts = {v: 0 for v in STATUS.values()}
     for _, status in rows:
         counts[STATUS[status]] += 1

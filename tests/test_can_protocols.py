@@ -30,6 +30,27 @@ def test_odrive_frame_ids_pack_node_and_command():
         proto.frame_id(64, proto.Cmd.HEARTBEAT)
 
 
+def test_odrive_ids_and_enumerations_are_the_firmwares():
+    """Written from the ODrive CAN protocol documentation (firmware 0.6; the
+    same values in the independent odrive-messages crate), not from our enums."""
+    ids = {"HEARTBEAT": 0x01, "ESTOP": 0x02, "GET_ERROR": 0x03, "SET_AXIS_STATE": 0x07,
+           "GET_ENCODER_ESTIMATES": 0x09, "SET_CONTROLLER_MODE": 0x0B, "SET_INPUT_VEL": 0x0D,
+           "SET_INPUT_TORQUE": 0x0E, "SET_LIMITS": 0x0F, "REBOOT": 0x16, "CLEAR_ERRORS": 0x18}
+    assert {c.name: c.value for c in proto.Cmd} == ids
+    assert {s.name: s.value for s in proto.AxisState} == {
+        "UNDEFINED": 0, "IDLE": 1, "STARTUP_SEQUENCE": 2, "FULL_CALIBRATION_SEQUENCE": 3,
+        "MOTOR_CALIBRATION": 4, "ENCODER_INDEX_SEARCH": 6, "ENCODER_OFFSET_CALIBRATION": 7,
+        "CLOSED_LOOP_CONTROL": 8}
+    assert {m.name: m.value for m in proto.ControlMode} == {
+        "VOLTAGE_CONTROL": 0, "TORQUE_CONTROL": 1, "VELOCITY_CONTROL": 2, "POSITION_CONTROL": 3}
+    assert {m.name: m.value for m in proto.InputMode} == {
+        "INACTIVE": 0, "PASSTHROUGH": 1, "VEL_RAMP": 2}
+    assert proto.MAX_NODE_ID == 63                      # 6 bits above the 5-bit command
+    assert proto.error_names(0x1000000 | 0x2000000) == "WATCHDOG_TIMER_EXPIRED|ESTOP_REQUESTED"
+    assert proto.error_names(0x4 | 0x8) == "TIMING_ERROR|MISSING_ESTIMATE"
+    assert proto.error_names(0) == "none"
+
+
 def test_odrive_host_commands_are_encoded_byte_for_byte():
     assert proto.set_input_vel(-2.5, 0.25) == H("00 00 20 c0 00 00 80 3e")
     assert proto.set_axis_state(proto.AxisState.CLOSED_LOOP_CONTROL) == H("08 00 00 00")

@@ -157,15 +157,28 @@ def test_samples_bunched_by_a_loop_stall_are_motion_not_a_glitch():
     # a real glitch right after the stall is still one (50 rad > 6 rad) ...
     glitch = monitor.check(JointReading(last + 0.1057, [50.0], [speed], []), last + 0.1057)
     assert glitch is not None and "position jumped" in glitch
-    # ... and after STALL_MEMORY steady cycles the bound is the period's again:
-    # a 1 rad jump in 5 ms (0.3 rad bound) is a glitch
-    t = last + 0.1057
-    for _ in range(ReadingMonitor.STALL_MEMORY):
+
+
+@pytest.mark.parametrize("checks_after_stall, glitch", [(3, False), (4, True)])
+def test_a_stall_widens_the_glitch_bound_for_four_checks(checks_after_stall, glitch):
+    """The check that sees a 100 ms gap and the next three (four: 20 ms at
+    200 Hz, time for samples queued during the stall to come in) allow the
+    stall's motion; the fourth check after it is back to the period's bound
+    (3 * 20 rad/s * 5 ms = 0.3 rad): a 1 rad jump is a glitch again."""
+    period = 0.005
+    monitor = ReadingMonitor(["wheel"], [20.0], period, MonitorLimits(3.0, 0.05, 0.3, 0.5))
+    t = 0.0
+    for _ in range(5):
+        assert monitor.check(JointReading(t, [0.0], [0.0], []), t) is None
         t += period
-        assert check(t, t, t) is None
+    t += 0.1                                        # the stall
+    assert monitor.check(JointReading(t, [0.0], [0.0], []), t) is None
+    for _ in range(checks_after_stall - 1):
+        t += period
+        assert monitor.check(JointReading(t, [0.0], [0.0], []), t) is None
     t += period
-    jumped = monitor.check(JointReading(t, [speed * t + 1.0], [speed], []), t)
-    assert jumped is not None and "position jumped by 1.05 rad" in jumped
+    problem = monitor.check(JointReading(t, [1.0], [0.0], []), t)
+    assert (problem is not None and "position jumped by 1 rad" in problem) == glitch, problem
 
 
 def test_monitor_limits_cannot_change_under_a_running_monitor():
