@@ -9,7 +9,6 @@ import contextlib
 import os
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -18,7 +17,8 @@ import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from ros_probe import Bringup, Probe, Teleop, claim_domain_id, relative_pose, wait_until
+from ros_probe import (Bringup, Probe, Teleop, claim_domain_id, relative_pose, spin_in_thread,
+                       wait_until)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -147,27 +147,15 @@ def test_fleet_arguments_that_make_no_sense_are_refused(tmp_path):
 def node_in_domain(domain_id: int, name: str):
     """An rclpy node in another ROS domain (its own context), spun in a thread."""
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     node = rclpy.create_node(name, context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    stop = threading.Event()
-
-    def spin():
-        while not stop.is_set() and context.ok():
-            executor.spin_once(timeout_sec=0.05)
-
-    thread = threading.Thread(target=spin, daemon=True)
-    thread.start()
+    stop = spin_in_thread(node, context)
     try:
         yield node
     finally:
-        stop.set()
-        thread.join(2.0)
-        executor.shutdown()
+        stop()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
 
