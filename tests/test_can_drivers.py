@@ -55,10 +55,13 @@ def assert_free_motors_follow_torques(speeds, motor_torques, inertia, longest):
     must be the same on every axis (sign, scale and gear of each axis right)
     and no longer than ``longest`` [s], the time since the first torque frame
     (nor less than a fifth of it: the emulator ticks every ms, slower under
-    load)."""
+    load). The emulator thread advances the motors one after another, so on
+    a loaded machine they are read a few ms apart (measured: 5 % of 0.1 s
+    with the machine at load 12): the times agree within 20 %, which still
+    catches a wrong gear (x10), direction or per-mille scale."""
     implied = [s * 2 * math.pi * inertia / t for s, t in zip(speeds, motor_torques)]
     assert all(0.2 * longest < t <= longest for t in implied), (implied, longest)
-    assert max(implied) / min(implied) < 1.05, implied
+    assert max(implied) / min(implied) < 1.2, implied
 
 
 @pytest.mark.parametrize("backend,robot", [("odrive_can", "hamr"), ("cia402", "hamr"),
