@@ -185,3 +185,23 @@ def test_monitor_limits_cannot_change_under_a_running_monitor():
     limits = MonitorLimits(3.0, 0.05, 0.3, 0.5)
     with pytest.raises(AttributeError):
         limits.velocity_factor = 100.0            # frozen: a config, not state
+
+
+@pytest.mark.parametrize("measured, faults", [(5.0, False), (3.0, True)])
+def test_tracking_error_faults_only_over_its_fraction_of_the_limit(measured, faults):
+    """tracking_error 0.3 of a 20 rad/s limit = 6 rad/s: a joint told 10 rad/s
+    that turns at 5 (5 off) follows; at 3 (7 off) it cannot, once
+    that has lasted tracking_timeout (0.5 s)."""
+    period = 0.005
+    monitor = ReadingMonitor(["wheel"], [20.0], period, MonitorLimits(3.0, 0.05, 0.3, 0.5))
+    command = np.array([10.0])
+    problems = []
+    for k in range(121):                             # 0.6 s > tracking_timeout
+        t = k * period
+        problems.append(monitor.check(JointReading(t, [measured * t], [measured], []), t,
+                                      command))
+    assert all(p is None for p in problems[:100])    # the first 0.5 s: never
+    late = [p for p in problems[100:] if p is not None]
+    assert bool(late) == faults, late
+    if faults:
+        assert "wheel: cannot follow its command (10 rad/s commanded, 3 rad/s" in late[0]
