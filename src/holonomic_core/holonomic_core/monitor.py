@@ -26,8 +26,8 @@ class MonitorLimits:
     ``velocity_factor`` [-]: a measured joint speed above this multiple of the
     joint's speed limit is a glitch (position increments are held to the same
     bound over the time between samples: at least the period, or the last
-    stall of the control loop); ``reading_timeout`` [s]: readings whose stamp has not advanced for
-    this long are frozen; ``tracking_error`` [-]: a joint whose measured speed
+    stall of the control loop); ``reading_timeout`` [s]: readings whose stamp
+    has not advanced for this long are frozen; ``tracking_error`` [-]: a joint whose measured speed
     differs from its command by more than this fraction of its speed limit ...
     ``tracking_timeout`` [s]: ... for this long cannot follow (0 disables).
     """
