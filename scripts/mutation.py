@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import signal
 import sqlite3
 import subprocess
 import sys
@@ -72,7 +73,7 @@ def scratch_copy() -> Path:
 
 
 #: [s] without a new result, a mutmut run is taken as hung and stopped
-STALL = 600.0
+STALL = 240.0
 
 
 def _tested(cache: Path) -> int:
@@ -106,20 +107,28 @@ def run_module(work: Path, name: str, out: Path, budget: float | None) -> dict[s
            "--simple-output", "--no-progress", "-b", "20"]
     started = time.monotonic()
     log = open(out / f"{name}.log", "w")
-    proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=log, stderr=subprocess.STDOUT)
     # mutmut 2 can hang when its test worker dies (seen on an overloaded
-    # machine); and a run may have to end by a deadline: stop it then, the
-    # mutants not run yet are reported as such
-    last_change, last_done = time.monotonic(), -1
-    while proc.poll() is None:
-        time.sleep(10.0)
-        done = _tested(cache)
-        if done != last_done:
-            last_change, last_done = time.monotonic(), done
-        over_budget = budget is not None and time.monotonic() - started > budget
-        if over_budget or time.monotonic() - last_change > STALL:
-            proc.terminate()
-            proc.wait()
+    # machine): a run without a new result for STALL seconds is stopped and
+    # started again (it resumes from its cache). A run may also have to end
+    # by a deadline (budget): the mutants not run yet are reported as such.
+    while True:
+        # its own process group: stopping it stops its test worker and pytest too
+        proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                start_new_session=True)
+        last_change, last_done, stalled = time.monotonic(), -1, False
+        over_budget = False
+        while proc.poll() is None:
+            time.sleep(5.0)
+            done = _tested(cache)
+            if done != last_done:
+                last_change, last_done = time.monotonic(), done
+            over_budget = budget is not None and time.monotonic() - started > budget
+            stalled = time.monotonic() - last_change > STALL
+            if over_budget or stalled:
+                os.killpg(proc.pid, signal.SIGTERM)
+                proc.wait()
+        if not stalled or over_budget:
+            break
     log.close()
     rows = []
     if cache.exists():
