@@ -48,6 +48,7 @@ def test_odrive_ids_and_enumerations_are_the_firmwares():
     assert proto.MAX_NODE_ID == 63                      # 6 bits above the 5-bit command
     assert proto.error_names(0x1000000 | 0x2000000) == "WATCHDOG_TIMER_EXPIRED|ESTOP_REQUESTED"
     assert proto.error_names(0x4 | 0x8) == "TIMING_ERROR|MISSING_ESTIMATE"
+    assert proto.error_names(0x1 | 0x2) == "INITIALIZING|SYSTEM_LEVEL"
     assert proto.error_names(0) == "none"
 
 

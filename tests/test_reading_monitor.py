@@ -205,3 +205,13 @@ def test_tracking_error_faults_only_over_its_fraction_of_the_limit(measured, fau
     assert bool(late) == faults, late
     if faults:
         assert "wheel: cannot follow its command (10 rad/s commanded, 3 rad/s" in late[0]
+
+
+@pytest.mark.parametrize("positions, velocities", [([0.0, 0.0], [0.0, 0.0, 0.0]),
+                                                   ([0.0, 0.0, 0.0], [0.0])])
+def test_a_reading_of_the_wrong_size_is_named(positions, velocities):
+    monitor = ReadingMonitor(["a", "b", "c"], [1.0, 1.0, 1.0], 0.005,
+                             MonitorLimits(3.0, 0.05, 0.3, 0.5))
+    problem = monitor.check(JointReading(0.0, positions, velocities, []), 0.0)
+    assert problem == (f"driver returned {len(positions)} positions and {len(velocities)} "
+                       "velocities for 3 joints")
