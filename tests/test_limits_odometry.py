@@ -49,6 +49,12 @@ def test_limits_that_are_not_three_positive_numbers_are_refused(limits):
         TwistLimiter(**args)
 
 
+def test_an_axis_that_does_not_change_does_not_stop_the_others_being_limited():
+    # x holds 0.5 m/s; y asks for 0 -> 1.0 m/s: 1.0 m/s^2 * 0.1 s = 0.1 m/s of it
+    out = LIMITER.limit_acceleration(np.array([0.5, 1.0, 0.0]), np.array([0.5, 0.0, 0.0]), 0.1)
+    np.testing.assert_allclose(out, [0.5, 0.1, 0.0], atol=1e-12)
+
+
 def test_acceleration_ramps_along_the_commanded_direction():
     prev = np.zeros(3)
     target = np.array([0.5, 0.5, 1.0])  # within speed limits
