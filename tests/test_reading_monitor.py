@@ -207,11 +207,18 @@ def test_tracking_error_faults_only_over_its_fraction_of_the_limit(measured, fau
         assert "wheel: cannot follow its command (10 rad/s commanded, 3 rad/s" in late[0]
 
 
-@pytest.mark.parametrize("positions, velocities", [([0.0, 0.0], [0.0, 0.0, 0.0]),
-                                                   ([0.0, 0.0, 0.0], [0.0])])
-def test_a_reading_of_the_wrong_size_is_named(positions, velocities):
+@pytest.mark.parametrize("positions, velocities, sizes", [
+    ([0.0, 0.0], [0.0, 0.0, 0.0], (2, 3)), ([0.0, 0.0, 0.0], [0.0], (3, 1)),
+    (0.0, 0.0, (0, 0))])                                    # scalars: no joints at all
+def test_a_reading_of_the_wrong_size_is_named(positions, velocities, sizes):
     monitor = ReadingMonitor(["a", "b", "c"], [1.0, 1.0, 1.0], 0.005,
                              MonitorLimits(3.0, 0.05, 0.3, 0.5))
     problem = monitor.check(JointReading(0.0, positions, velocities, []), 0.0)
-    assert problem == (f"driver returned {len(positions)} positions and {len(velocities)} "
+    assert problem == (f"driver returned {sizes[0]} positions and {sizes[1]} "
                        "velocities for 3 joints")
+
+
+def test_a_zero_reading_timeout_disables_the_frozen_check():
+    monitor = ReadingMonitor(["a"], [1.0], 0.005, MonitorLimits(3.0, 0.0, 0.3, 0.5))
+    for k in range(100):                    # the same stamp for 0.5 s
+        assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.0 + k * 0.005) is None
