@@ -158,6 +158,34 @@ def test_odrive_driver_decodes_scripted_encoder_frames():
 
 
 # -- CANopen / CiA 402 --------------------------------------------------------------------------
+def test_canopen_identifiers_and_indices_are_the_standards():
+    """Written from CiA 301 (pre-defined connection set, NMT, object
+    dictionary) and CiA 402 (drive profile objects), not from our module:
+    the driver and the emulated drive share those constants, so a wrong one
+    would go unnoticed between them."""
+    assert (co.NMT, co.SYNC, co.EMCY, co.SDO_TX, co.SDO_RX, co.HEARTBEAT) == (
+        0x000, 0x080, 0x080, 0x580, 0x600, 0x700)
+    assert co.TPDO == (0x180, 0x280, 0x380, 0x480) and co.RPDO == (0x200, 0x300, 0x400, 0x500)
+    assert co.PDO_INVALID == 1 << 31
+    assert {c.name: c.value for c in co.NmtCommand} == {
+        "START": 0x01, "STOP": 0x02, "ENTER_PRE_OPERATIONAL": 0x80, "RESET_NODE": 0x81,
+        "RESET_COMMUNICATION": 0x82}
+    assert {s.name: s.value for s in co.NmtState} == {
+        "BOOT_UP": 0x00, "STOPPED": 0x04, "OPERATIONAL": 0x05, "PRE_OPERATIONAL": 0x7F}
+    assert (co.DEVICE_TYPE, co.ERROR_REGISTER, co.CONSUMER_HEARTBEAT_TIME,
+            co.PRODUCER_HEARTBEAT_TIME) == (0x1000, 0x1001, 0x1016, 0x1017)
+    assert (co.RPDO_COMM, co.RPDO_MAP, co.TPDO_COMM, co.TPDO_MAP) == (0x1400, 0x1600, 0x1800,
+                                                                      0x1A00)
+    assert (co.ERROR_CODE, co.CONTROLWORD, co.STATUSWORD, co.QUICK_STOP_OPTION,
+            co.MODES_OF_OPERATION, co.MODES_DISPLAY, co.POSITION_ACTUAL, co.VELOCITY_ACTUAL,
+            co.TARGET_VELOCITY, co.TARGET_TORQUE, co.MOTOR_RATED_TORQUE, co.SUPPORTED_MODES) == (
+        0x603F, 0x6040, 0x6041, 0x605A, 0x6060, 0x6061, 0x6064, 0x606C, 0x60FF, 0x6071, 0x6076,
+        0x6502)
+    assert co.PROFILE_402 == 402
+    assert {m.name: m.value for m in co.OpMode} == {
+        "PROFILE_VELOCITY": 3, "CYCLIC_SYNCHRONOUS_VELOCITY": 9, "CYCLIC_SYNCHRONOUS_TORQUE": 10}
+
+
 def test_sdo_expedited_frames_byte_for_byte():
     assert co.sdo_download_request(0x6060, 0, H("09")) == H("2f 60 60 00 09 00 00 00")
     assert co.sdo_download_request(0x1017, 0, struct.pack("<H", 50)) == H("2b 17 10 00 32 00 00 00")
