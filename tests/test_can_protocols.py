@@ -184,6 +184,14 @@ def test_canopen_identifiers_and_indices_are_the_standards():
     assert co.PROFILE_402 == 402
     assert {m.name: m.value for m in co.OpMode} == {
         "PROFILE_VELOCITY": 3, "CYCLIC_SYNCHRONOUS_VELOCITY": 9, "CYCLIC_SYNCHRONOUS_TORQUE": 10}
+    # CiA 402 device control commands (controlword bits 0-3 and 7)
+    assert {c.name: c.value for c in co.Control} == {
+        "DISABLE_VOLTAGE": 0x0000, "QUICK_STOP": 0x0002, "SHUTDOWN": 0x0006,
+        "SWITCH_ON": 0x0007, "ENABLE_OPERATION": 0x000F, "FAULT_RESET": 0x0080}
+    # the power states by their CiA 402 names (shown in the driver's messages)
+    assert [s.value for s in co.State] == [
+        "NOT READY TO SWITCH ON", "SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON",
+        "OPERATION ENABLED", "QUICK STOP ACTIVE", "FAULT REACTION ACTIVE", "FAULT"]
 
 
 def test_sdo_expedited_frames_byte_for_byte():
