@@ -10,12 +10,13 @@ WS ?= ros2_ws
 TESTS ?= tests
 ENV := . $(WS)/env.sh &&
 
-.PHONY: help setup demo test bench clean
+.PHONY: help setup demo test bench mutation clean
 
 help:
 	@echo "make demo   set up, then drive the simulated HAMR headless; prints a table, writes a plot"
 	@echo "make test   set up, then run the whole test suite"
 	@echo "make bench  set up, then run the benchmarks (about 6 min); writes docs/benchmarks.md"
+	@echo "make mutation  mutation testing of the ROS-free core (long: see docs/testing.md)"
 	@echo "make setup  only set up $(VENV)/ and build $(WS)/ (PYTHON=python3.12 for another Python)"
 	@echo "make clean  remove $(VENV)/, $(WS)/ and out/"
 
@@ -30,6 +31,10 @@ test: setup
 
 bench: setup
 	@$(ENV) python bench/run.py $(BENCH_ARGS)
+
+# MUTATION_ARGS: some modules only, e.g. MUTATION_ARGS="limits monitor"
+mutation: setup
+	@$(ENV) python scripts/mutation.py $(MUTATION_ARGS)
 
 clean:
 	rm -rf $(VENV) $(WS) out .pytest_cache .hypothesis

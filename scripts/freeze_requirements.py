@@ -18,9 +18,9 @@ HEADER = """\
 # ros-jazzy-rmw-fastrtps-cpp, ros-jazzy-rosgraph-msgs, ros-jazzy-std-srvs, the
 # rosidl generators and ament_cmake (to build tf2_msgs), numpy, pybullet,
 # pyyaml, matplotlib, python-can, canopen, mcap, mcap-ros2-support, foxglove-sdk,
-# colcon-common-extensions, pytest, hypothesis, and for the tests only cantools,
-# odrive-can (which ships ODrive's CANSimple DBC files) and websockets (an
-# independent Foxglove client)."""
+# colcon-common-extensions, pytest, hypothesis, mutmut (make mutation), and for
+# the tests only cantools, odrive-can (which ships ODrive's CANSimple DBC files)
+# and websockets (an independent Foxglove client)."""
 
 pins = {}
 for dist in md.distributions():

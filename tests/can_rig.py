@@ -3,8 +3,8 @@
 ``CanRig(backend, robot)`` opens a private python-can virtual channel,
 starts one emulated drive per joint (background thread), a sniffer that
 records every frame with its send time, the driver and a BaseController.
-``run(seconds, twist)`` steps the controller at its rate on the wall clock
-and records when each cycle started.
+``run(seconds, twist)`` steps the controller at its rate in the product's
+ControlLoop and records when each cycle started.
 """
 
 from __future__ import annotations
@@ -13,12 +13,15 @@ import gc
 import itertools
 import os
 import struct
+import sys
+import threading
 import time
 
 import can
 import numpy as np
 
 from holonomic_core.controller import BaseController, load_config
+from holonomic_core.loop import ControlLoop
 from holonomic_drivers import cia402_protocol as co
 from holonomic_drivers import odrive_protocol as proto
 from holonomic_drivers.emulated_cia402 import EmulatedCia402Drive
@@ -39,6 +42,13 @@ class CanRig:
         # own start-up objects for the same reason (base_controller_node.main).
         gc.collect()
         gc.freeze()
+        # ... and, like the node (base_controller_node.main), a short GIL
+        # switch interval: the loop, canopen's notifier and the emulated
+        # drives are threads of one process; with Python's default 5 ms a
+        # SYNC -> answer -> notifier round trip can wait tens of ms for the
+        # GIL on a busy machine and trip the 50 ms feedback timeout.
+        self._switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(5e-4)
         self.backend = backend
         self.channel = unique_channel(backend)
         params = {"driver": backend, f"{backend}.interface": "virtual",
@@ -88,15 +98,39 @@ class CanRig:
         return self.controller.step()
 
     def run(self, seconds: float, twist=None) -> None:
-        period = self.controller.dt
-        next_time = time.monotonic()
-        for _ in range(round(seconds / period)):
+        """Run ``seconds`` worth of cycles in the product's own ControlLoop
+        (absolute deadlines; after a stall it re-anchors instead of running
+        the missed cycles back to back, as the node does)."""
+        cycles = round(seconds / self.controller.dt)
+        done = threading.Event()
+        errors: list[BaseException] = []
+        count = 0
+
+        def cycle() -> None:
+            nonlocal count
+            if count >= cycles:
+                done.set()
+                return
             if twist is not None:
                 self.controller.set_command(twist)
             self.step()
             self.odometry_twists.append(self.controller.odometry.twist.copy())
-            next_time += period
-            time.sleep(max(0.0, next_time - time.monotonic()))
+            count += 1
+
+        def on_error(exc: BaseException) -> bool:
+            errors.append(exc)
+            done.set()
+            return False
+
+        loop = ControlLoop(self.controller.dt, cycle, on_error, name="can_rig_loop")
+        loop.start()
+        try:
+            if not done.wait(10.0 * seconds + 10.0):
+                raise TimeoutError(f"{cycles} cycles did not run within {10 * seconds + 10:g} s")
+        finally:
+            loop.stop()
+        if errors:
+            raise errors[0]
 
     def mean_odometry_twist(self, seconds: float) -> np.ndarray:
         """Mean odometry twist over the last ``seconds`` of ``run``."""
@@ -121,6 +155,7 @@ class CanRig:
             for device in self.devices:
                 device.close()
             self.sniffer.shutdown()
+            sys.setswitchinterval(self._switch_interval)
 
     # -- what the drives were told -----------------------------------------------------
     def velocity_setpoints(self, node: int, frames=None) -> list[tuple[float, float]]:

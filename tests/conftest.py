@@ -6,12 +6,11 @@ from __future__ import annotations
 
 import os
 import tempfile
-import threading
 from pathlib import Path
 
 import pytest
 
-from ros_probe import Bringup, claim_domain_id
+from ros_probe import Bringup, claim_domain_id, spin_in_thread
 
 
 def pytest_configure(config):
@@ -25,24 +24,12 @@ def pytest_configure(config):
 def ros():
     """rclpy initialised once for the session, with a probe node spun in a thread."""
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
 
     rclpy.init()
     node = rclpy.create_node("holonomic_test_probe")
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    stop = threading.Event()
-
-    def spin():
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.05)
-
-    thread = threading.Thread(target=spin, daemon=True)
-    thread.start()
+    stop = spin_in_thread(node)
     yield node
-    stop.set()
-    thread.join(2.0)
-    executor.shutdown()
+    stop()
     node.destroy_node()
     rclpy.try_shutdown()
 

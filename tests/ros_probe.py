@@ -12,6 +12,7 @@ import shutil
 import signal
 import subprocess
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -22,6 +23,31 @@ from holonomic_bringup.robot_client import relative_pose, wait_until  # noqa: F4
 
 
 _held_domain_locks = []
+
+
+def spin_in_thread(node, context=None):
+    """Spin ``node`` with its own executor in a daemon thread (``context``:
+    rclpy's default one if None); returns a function that stops it."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    stop = threading.Event()
+    ok = rclpy.ok if context is None else context.ok
+
+    def spin():
+        while not stop.is_set() and ok():
+            executor.spin_once(timeout_sec=0.05)
+
+    thread = threading.Thread(target=spin, daemon=True)
+    thread.start()
+
+    def finish():
+        stop.set()
+        thread.join(2.0)
+        executor.shutdown()
+    return finish
 
 
 def claim_domain_id() -> int:

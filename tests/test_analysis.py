@@ -327,7 +327,9 @@ def test_plot_writes_the_figures_and_sweep_prints_a_row_per_value(tmp_path, caps
     assert analyze_main(["hamr", "--plot", str(tmp_path),
                          "--sweep", "ddrot.turret_offset=0.05:0.4:8"]) == 0
     out = capsys.readouterr().out
-    assert "H_hat 0.629" in out
+    # H_hat of HAMR = constant-heading lateral / forward speed = turret rate * b
+    # / (wheel rate * r) = 4.712 * 0.1641 / (20 * 0.0615) = 0.7732 / 1.23 = 0.629
+    assert f"H_hat {TURRET * B / (WHEEL * R):.3f}" in out
     assert sum(1 for line in out.splitlines() if line.strip().startswith(("0.", "0,"))) >= 8
     for name in ("hamr_ellipsoid_3d.png", "hamr_projections.png",
                  "hamr_sweep_ddrot.turret_offset.png"):

@@ -30,6 +30,28 @@ def test_odrive_frame_ids_pack_node_and_command():
         proto.frame_id(64, proto.Cmd.HEARTBEAT)
 
 
+def test_odrive_ids_and_enumerations_are_the_firmwares():
+    """Written from the ODrive CAN protocol documentation (firmware 0.6; the
+    same values in the independent odrive-messages crate), not from our enums."""
+    ids = {"HEARTBEAT": 0x01, "ESTOP": 0x02, "GET_ERROR": 0x03, "SET_AXIS_STATE": 0x07,
+           "GET_ENCODER_ESTIMATES": 0x09, "SET_CONTROLLER_MODE": 0x0B, "SET_INPUT_VEL": 0x0D,
+           "SET_INPUT_TORQUE": 0x0E, "SET_LIMITS": 0x0F, "REBOOT": 0x16, "CLEAR_ERRORS": 0x18}
+    assert {c.name: c.value for c in proto.Cmd} == ids
+    assert {s.name: s.value for s in proto.AxisState} == {
+        "UNDEFINED": 0, "IDLE": 1, "STARTUP_SEQUENCE": 2, "FULL_CALIBRATION_SEQUENCE": 3,
+        "MOTOR_CALIBRATION": 4, "ENCODER_INDEX_SEARCH": 6, "ENCODER_OFFSET_CALIBRATION": 7,
+        "CLOSED_LOOP_CONTROL": 8}
+    assert {m.name: m.value for m in proto.ControlMode} == {
+        "VOLTAGE_CONTROL": 0, "TORQUE_CONTROL": 1, "VELOCITY_CONTROL": 2, "POSITION_CONTROL": 3}
+    assert {m.name: m.value for m in proto.InputMode} == {
+        "INACTIVE": 0, "PASSTHROUGH": 1, "VEL_RAMP": 2}
+    assert proto.MAX_NODE_ID == 63                      # 6 bits above the 5-bit command
+    assert proto.error_names(0x1000000 | 0x2000000) == "WATCHDOG_TIMER_EXPIRED|ESTOP_REQUESTED"
+    assert proto.error_names(0x4 | 0x8) == "TIMING_ERROR|MISSING_ESTIMATE"
+    assert proto.error_names(0x1 | 0x2) == "INITIALIZING|SYSTEM_LEVEL"
+    assert proto.error_names(0) == "none"
+
+
 def test_odrive_host_commands_are_encoded_byte_for_byte():
     assert proto.set_input_vel(-2.5, 0.25) == H("00 00 20 c0 00 00 80 3e")
     assert proto.set_axis_state(proto.AxisState.CLOSED_LOOP_CONTROL) == H("08 00 00 00")
@@ -136,6 +158,42 @@ def test_odrive_driver_decodes_scripted_encoder_frames():
 
 
 # -- CANopen / CiA 402 --------------------------------------------------------------------------
+def test_canopen_identifiers_and_indices_are_the_standards():
+    """Written from CiA 301 (pre-defined connection set, NMT, object
+    dictionary) and CiA 402 (drive profile objects), not from our module:
+    the driver and the emulated drive share those constants, so a wrong one
+    would go unnoticed between them."""
+    assert (co.NMT, co.SYNC, co.EMCY, co.SDO_TX, co.SDO_RX, co.HEARTBEAT) == (
+        0x000, 0x080, 0x080, 0x580, 0x600, 0x700)
+    assert co.TPDO == (0x180, 0x280, 0x380, 0x480) and co.RPDO == (0x200, 0x300, 0x400, 0x500)
+    assert co.PDO_INVALID == 1 << 31
+    assert {c.name: c.value for c in co.NmtCommand} == {
+        "START": 0x01, "STOP": 0x02, "ENTER_PRE_OPERATIONAL": 0x80, "RESET_NODE": 0x81,
+        "RESET_COMMUNICATION": 0x82}
+    assert {s.name: s.value for s in co.NmtState} == {
+        "BOOT_UP": 0x00, "STOPPED": 0x04, "OPERATIONAL": 0x05, "PRE_OPERATIONAL": 0x7F}
+    assert (co.DEVICE_TYPE, co.ERROR_REGISTER, co.CONSUMER_HEARTBEAT_TIME,
+            co.PRODUCER_HEARTBEAT_TIME) == (0x1000, 0x1001, 0x1016, 0x1017)
+    assert (co.RPDO_COMM, co.RPDO_MAP, co.TPDO_COMM, co.TPDO_MAP) == (0x1400, 0x1600, 0x1800,
+                                                                      0x1A00)
+    assert (co.ERROR_CODE, co.CONTROLWORD, co.STATUSWORD, co.QUICK_STOP_OPTION,
+            co.MODES_OF_OPERATION, co.MODES_DISPLAY, co.POSITION_ACTUAL, co.VELOCITY_ACTUAL,
+            co.TARGET_VELOCITY, co.TARGET_TORQUE, co.MOTOR_RATED_TORQUE, co.SUPPORTED_MODES) == (
+        0x603F, 0x6040, 0x6041, 0x605A, 0x6060, 0x6061, 0x6064, 0x606C, 0x60FF, 0x6071, 0x6076,
+        0x6502)
+    assert co.PROFILE_402 == 402
+    assert {m.name: m.value for m in co.OpMode} == {
+        "PROFILE_VELOCITY": 3, "CYCLIC_SYNCHRONOUS_VELOCITY": 9, "CYCLIC_SYNCHRONOUS_TORQUE": 10}
+    # CiA 402 device control commands (controlword bits 0-3 and 7)
+    assert {c.name: c.value for c in co.Control} == {
+        "DISABLE_VOLTAGE": 0x0000, "QUICK_STOP": 0x0002, "SHUTDOWN": 0x0006,
+        "SWITCH_ON": 0x0007, "ENABLE_OPERATION": 0x000F, "FAULT_RESET": 0x0080}
+    # the power states by their CiA 402 names (shown in the driver's messages)
+    assert [s.value for s in co.State] == [
+        "NOT READY TO SWITCH ON", "SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON",
+        "OPERATION ENABLED", "QUICK STOP ACTIVE", "FAULT REACTION ACTIVE", "FAULT"]
+
+
 def test_sdo_expedited_frames_byte_for_byte():
     assert co.sdo_download_request(0x6060, 0, H("09")) == H("2f 60 60 00 09 00 00 00")
     assert co.sdo_download_request(0x1017, 0, struct.pack("<H", 50)) == H("2b 17 10 00 32 00 00 00")
@@ -208,15 +266,42 @@ def test_cia402_driver_sends_the_scripted_frames():
         frames = rig.sniff()
         nmt = [bytes(m.data) for m in frames if m.arbitration_id == 0]
         assert nmt == [H("80 01"), H("80 02"), H("80 03"), H("01 01"), H("01 02"), H("01 03")]
-        expected = [co.sdo_upload_request(0x1000, 0),
-                    co.sdo_download_request(0x1017, 0, struct.pack("<H", 50)),
-                    # consumer: master 127 << 16 | 250 ms
-                    co.sdo_download_request(0x1016, 1, H("fa 00 7f 00")),
-                    co.sdo_download_request(0x6060, 0, H("09")),
-                    co.sdo_download_request(0x60FF, 0, bytes(4))]
-        expected += [co.sdo_download_request(i, s, d) for i, s, d in pdo_configuration(2)]
-        expected += [co.sdo_upload_request(0x6061, 0), co.sdo_upload_request(0x6502, 0),
-                     co.sdo_upload_request(0x6076, 0)]
+        # Written by hand from CiA 301 (not with the codec under test): an
+        # expedited SDO download is 0x23 / 0x2B / 0x2F for 4 / 2 / 1 data
+        # bytes (ccs 1, e = s = 1, n = 4 - size), then index (LE), subindex,
+        # data padded to 4; an upload request is 0x40, index, subindex, 0s.
+        # PDO set-up per PDO: COB-ID with bit 31 (invalid), transmission
+        # type 1 (every SYNC), mapping count 0, entries (index << 16 |
+        # subindex << 8 | bits), count, COB-ID valid. Node 2: RPDO1 0x202,
+        # RPDO2 0x302, TPDO1 0x182, TPDO2 0x282.
+        expected = [H(x) for x in (
+            "40 00 10 00 00 00 00 00",      # read 0x1000 device type
+            "2b 17 10 00 32 00 00 00",      # 0x1017 producer heartbeat 50 ms
+            "23 16 10 01 fa 00 7f 00",      # 0x1016.1 consumer: master 127, 250 ms
+            "2f 60 60 00 09 00 00 00",      # 0x6060 mode 9: cyclic synchronous velocity
+            "23 ff 60 00 00 00 00 00",      # 0x60FF target velocity 0
+            # RPDO1 (0x1400 / 0x1600): controlword 0x6040 16 bits, target velocity 0x60FF 32
+            "23 00 14 01 02 02 00 80", "2f 00 14 02 01 00 00 00", "2f 00 16 00 00 00 00 00",
+            "23 00 16 01 10 00 40 60", "23 00 16 02 20 00 ff 60", "2f 00 16 00 02 00 00 00",
+            "23 00 14 01 02 02 00 00",
+            # RPDO2 (0x1401 / 0x1601): controlword, target torque 0x6071 16, mode 0x6060 8
+            "23 01 14 01 02 03 00 80", "2f 01 14 02 01 00 00 00", "2f 01 16 00 00 00 00 00",
+            "23 01 16 01 10 00 40 60", "23 01 16 02 10 00 71 60", "23 01 16 03 08 00 60 60",
+            "2f 01 16 00 03 00 00 00", "23 01 14 01 02 03 00 00",
+            # TPDO1 (0x1800 / 0x1A00): position actual 0x6064 32, velocity actual 0x606C 32
+            "23 00 18 01 82 01 00 80", "2f 00 18 02 01 00 00 00", "2f 00 1a 00 00 00 00 00",
+            "23 00 1a 01 20 00 64 60", "23 00 1a 02 20 00 6c 60", "2f 00 1a 00 02 00 00 00",
+            "23 00 18 01 82 01 00 00",
+            # TPDO2 (0x1801 / 0x1A01): statusword 0x6041 16, error code 0x603F 16
+            "23 01 18 01 82 02 00 80", "2f 01 18 02 01 00 00 00", "2f 01 1a 00 00 00 00 00",
+            "23 01 1a 01 10 00 41 60", "23 01 1a 02 10 00 3f 60", "2f 01 1a 00 02 00 00 00",
+            "23 01 18 01 82 02 00 00",
+            # RPDO3/4 (0x402, 0x502) and TPDO3/4 (0x382, 0x482) invalid
+            "23 02 14 01 02 04 00 80", "23 03 14 01 02 05 00 80",
+            "23 02 18 01 82 03 00 80", "23 03 18 01 82 04 00 80",
+            "40 61 60 00 00 00 00 00",      # read 0x6061 mode display
+            "40 02 65 00 00 00 00 00",      # read 0x6502 supported drive modes
+            "40 76 60 00 00 00 00 00")]     # read 0x6076 rated torque
         assert _sdo_requests(frames, 2) == expected
 
         rig.driver.activate()

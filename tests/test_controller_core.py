@@ -128,6 +128,17 @@ def test_non_finite_or_malformed_command_is_rejected_and_stops_the_base(bad):
     reason = ctrl.set_command(bad)
     assert reason and "rejected" in reason
     assert ctrl.counters["rejected_commands"] == 1
+    # The base brakes from the very next cycle, at the deceleration limit --
+    # not after cmd_timeout (0.5 s = 100 cycles) on the last good command:
+    # 0.5 m/s at 2.0 m/s^2 (hamr.yaml) loses decel * dt = 0.01 m/s a cycle and
+    # is at rest after 0.5 / 0.01 = 50 cycles.
+    decel = ctrl.config.controller.max_deceleration[0]
+    run(ctrl, clock, 1)
+    assert ctrl.twist_command[0] == pytest.approx(0.5 - decel * ctrl.dt, abs=1e-12)
+    stop = math.ceil(0.5 / (decel * ctrl.dt) - 1e-9)
+    assert stop < ctrl.cmd_timeout / ctrl.dt
+    run(ctrl, clock, stop - 1)
+    assert np.all(ctrl.twist_command == 0.0) and np.all(ctrl.joint_command == 0.0)
     run(ctrl, clock, 200)
     assert np.all(ctrl.joint_command == 0.0)
     assert np.all(np.isfinite(ctrl.odometry.pose))

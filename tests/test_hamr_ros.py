@@ -64,13 +64,18 @@ def test_base_moves_with_the_commanded_body_twist(hamr, name):
     assert abs(achieved[2] - cmd[2]) <= 0.03 * max(w_cmd, 0.3), achieved
 
 
-def test_odometry_stays_within_2_percent_of_distance_over_20_s(hamr):
+def test_odometry_stays_within_0_2_percent_of_distance_over_20_s(hamr):
     script = [((0.6, 0.0, 0.0), 3.0), ((0.0, 0.4, 0.0), 3.0), ((0.3, 0.3, 0.5), 4.0),
               ((0.0, 0.0, -1.5), 2.0), ((-0.4, 0.2, 0.3), 4.0), ((0.5, -0.3, -0.4), 4.0)]
     distance, error, heading = drive_script(hamr, script)
-    assert distance > 8.0
-    assert error <= 0.02 * distance, (error, distance)
-    assert heading < 0.05
+    # 8.8 m as scripted, less the ramps and whatever a loaded machine drops
+    # (7.8 m measured with two busy CPUs beside the test)
+    assert distance > 6.0
+    # measured (ideal motors, sim.ideal_motors:=true): 3.4 mm over 7.8 m
+    # (0.044 %), heading 0.0018 rad; bounds ~5x that: a kinematic or
+    # odometry error of a fraction of a percent fails
+    assert error <= 0.002 * distance, (error, distance)
+    assert heading < 0.01, heading
 
 
 
@@ -83,10 +88,13 @@ def test_stale_cmd_vel_stops_the_base(hamr):
     # 2.0 m/s^2 (hamr.yaml) -- at rest 0.5 + 0.25 s after the last command
     wait_until(lambda: np.linalg.norm(hamr.latest_truth().twist) < 0.01, 3.0,
                "the base to stop after the command went stale")
-    assert time.monotonic() - last_cmd < 1.5
-    # coasting distance: 0.5 m/s * 0.5 s + 0.5^2 / (2 * 2.0) = 0.31 m (+ margin)
+    # measured 0.77 s (0.02 s of latency over the 0.75 s); 0.15 s of slack
+    stopped_after = time.monotonic() - last_cmd
+    assert stopped_after < 0.5 + 0.25 + 0.15, stopped_after
+    # coasting distance: 0.5 m/s * 0.5 s + 0.5^2 / (2 * 2.0) = 0.3125 m
+    # (measured 0.304 m): it held the command until the timeout, then braked
     travelled = np.linalg.norm(hamr.latest_truth().pose[:2] - start[:2])
-    assert 0.2 < travelled < 0.37
+    assert travelled == pytest.approx(0.3125, abs=0.03), travelled
 
 
 def test_nan_commands_never_move_the_base_and_stop_a_moving_one(hamr):
@@ -102,9 +110,22 @@ def test_nan_commands_never_move_the_base_and_stop_a_moving_one(hamr):
     hamr.drive((0.5, 0.0, 0.0), 1.5)
     hamr.publish(math.nan, 0.0, 0.0)
     t_nan = time.monotonic()
-    wait_until(lambda: np.linalg.norm(hamr.latest_truth().twist) < 0.01, 2.0,
+    at_nan = hamr.latest_truth().pose
+    wait_until(lambda: np.linalg.norm(hamr.latest_truth().twist) < 0.01, 3.0,
                "the base to stop after a NaN command")
-    assert time.monotonic() - t_nan < 0.5 + 0.5  # < cmd_timeout + decel time
+    # Braking starts at the next cycle: 0.5 m/s at 2.0 m/s^2 (hamr.yaml) is
+    # 0.25 s, measured 0.27-0.29 s from the publish to a ground truth at rest. A
+    # base that dropped the NaN but kept the last good command would only
+    # stop after cmd_timeout + braking = 0.5 + 0.25 s (measured 0.73 s), so
+    # anything under cmd_timeout proves the NaN itself stopped it.
+    stop_time = time.monotonic() - t_nan
+    assert stop_time < 0.5, stop_time
+    # the same in distance (free of the machine's load): braking from 0.5 m/s
+    # at 2.0 m/s^2 covers 0.5^2 / (2 * 2.0) = 0.06 m (measured 0.074 m);
+    # holding the last good command until the timeout would add 0.5 m/s *
+    # 0.5 s = 0.25 m
+    braked = np.linalg.norm(hamr.latest_truth().pose[:2] - at_nan[:2])
+    assert braked < 0.15, braked
 
 
 def test_disarmed_base_ignores_cmd_vel_and_rearms(hamr):

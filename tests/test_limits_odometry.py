@@ -24,6 +24,37 @@ def test_velocity_limit_scales_the_whole_twist_and_keeps_its_direction():
     assert scale == pytest.approx(0.5)
 
 
+def test_velocity_limit_by_hand():
+    # (2, 0.25, 1): x is twice its 1.0 m/s limit, so everything is halved
+    limited, scale = LIMITER.limit_velocity(np.array([2.0, 0.25, 1.0]))
+    assert scale == 0.5 and limited.tolist() == [1.0, 0.125, 0.5]
+    # within every limit: unchanged, scale exactly 1, and a copy
+    within = np.array([0.5, -0.5, 2.0])
+    limited, scale = LIMITER.limit_velocity(within)
+    assert scale == 1.0 and limited.tolist() == within.tolist() and limited is not within
+
+
+@pytest.mark.parametrize("limits", [
+    dict(max_velocity=(1.0, 0.0, 2.0)),                  # a zero limit
+    dict(max_velocity=(1.0, -0.5, 2.0)),                 # a negative one
+    dict(max_velocity=(1.0, 0.5)),                       # two axes
+    dict(max_acceleration=(2.0, math.inf, 4.0)),         # not finite
+])
+def test_limits_that_are_not_three_positive_numbers_are_refused(limits):
+    args = dict(max_velocity=(1.0, 0.5, 2.0), max_acceleration=(2.0, 1.0, 4.0),
+                max_deceleration=(4.0, 2.0, 8.0))
+    args.update(limits)
+    name = next(iter(limits))
+    with pytest.raises(ValueError, match=rf"^TwistLimiter {name} must be 3 finite numbers > 0"):
+        TwistLimiter(**args)
+
+
+def test_an_axis_that_does_not_change_does_not_stop_the_others_being_limited():
+    # x holds 0.5 m/s; y asks for 0 -> 1.0 m/s: 1.0 m/s^2 * 0.1 s = 0.1 m/s of it
+    out = LIMITER.limit_acceleration(np.array([0.5, 1.0, 0.0]), np.array([0.5, 0.0, 0.0]), 0.1)
+    np.testing.assert_allclose(out, [0.5, 0.1, 0.0], atol=1e-12)
+
+
 def test_acceleration_ramps_along_the_commanded_direction():
     prev = np.zeros(3)
     target = np.array([0.5, 0.5, 1.0])  # within speed limits

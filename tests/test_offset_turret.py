@@ -10,6 +10,11 @@ from holonomic_core.model import load_model
 from holonomic_core.schema import ConfigError
 
 HAMR = dict(wheel_radius=0.0615, half_wheel_separation=0.1641, turret_offset=0.1641)
+# a != b, so that a formula that mixes up the half wheel separation a and the
+# turret offset b cannot pass: the paper's b = 2a design (Fig. 9) and a
+# turret closer to the axle than the wheels (b = a / 2)
+B_IS_2A = dict(wheel_radius=0.0615, half_wheel_separation=0.1641, turret_offset=0.3282)
+B_IS_HALF_A = dict(wheel_radius=0.05, half_wheel_separation=0.2, turret_offset=0.1)
 # a sweep of turret angles like HSR's twin-caster test: -360..360 deg
 TURRET_SWEEP = np.radians(np.arange(-360.0, 361.0, 15.0))
 
@@ -37,9 +42,9 @@ def numeric_body_twist(kin, state, rates, h=1e-6):
     return np.array([c * dpose[0] + s * dpose[1], -s * dpose[0] + c * dpose[1], dpose[2]])
 
 
-@pytest.fixture
-def kin():
-    return OffsetTurretKinematics(**HAMR)
+@pytest.fixture(params=[HAMR, B_IS_2A, B_IS_HALF_A], ids=["a=b", "b=2a", "b=a/2"])
+def kin(request):
+    return OffsetTurretKinematics(**request.param)
 
 
 def test_inverse_then_forward_is_identity_over_turret_sweep(kin):
@@ -143,6 +148,28 @@ def test_invalid_geometry_is_rejected_naming_the_parameter(key, kwargs):
         OffsetTurretKinematics(**kwargs)
     assert err.value.key == key
     assert key in str(err.value)
+    # only a zero turret offset is explained as the loss of holonomy
+    assert ("not holonomic" in str(err.value)) == (key == "ddrot.turret_offset")
+
+
+@pytest.mark.parametrize("key, value", [("ddrot.wheel_radius", 100.5),       # over 100 m
+                                        ("body.drive_base.mass", 0.0)])      # not > 0
+def test_geometry_out_of_range_is_refused_by_the_schema(key, value):
+    from holonomic_core.controller import load_config
+    with pytest.raises(ConfigError) as err:
+        load_config("hamr", {key: value})
+    assert err.value.key == key
+
+
+def test_estimate_is_exact_with_an_empty_read_only_residual(kin):
+    q, rates = np.array([0.0, 0.0, 0.4]), np.array([3.0, -2.0, 1.0])
+    twist, residual = kin.estimate(q, rates)
+    np.testing.assert_allclose(twist, kin.forward(q, rates), atol=0)
+    # a square Jacobian leaves nothing to fit: no residual; the one empty
+    # array is shared by every call, so nobody may write into it
+    assert residual.shape == (0,) and not residual.flags.writeable
+    with pytest.raises(ValueError, match=r"^estimator must be one of \('slip_min'"):
+        kin.forward(q, rates, "kalman")
 
 
 def test_zero_turret_offset_in_a_config_file_is_rejected(tmp_path):
@@ -160,6 +187,7 @@ def load_model_path_text():
 
 def test_load_model_hamr_follows_the_contract():
     model = load_model("hamr")
+    assert model.kind == "ddrot" and OffsetTurretKinematics.kind == "ddrot"
     assert model.joint_names == ("left_wheel_joint", "right_wheel_joint", "turret_joint")
     kin = model.kinematics
     assert (kin.r, kin.a, kin.b) == (0.0615, 0.1641, 0.1641)
@@ -199,3 +227,35 @@ def test_unequal_wheels_turn_the_drive_base_by_their_rim_speed_difference():
 def test_per_wheel_radii_default_to_the_shared_radius():
     model = load_model("hamr", {"ddrot.right_wheel_radius": 0.062})
     assert (model.kinematics.r_left, model.kinematics.r_right) == (0.0615, 0.062)
+
+
+# Hand-derived inverse with a != b, from eq. 1 (s = sin, c = cos) in the
+# paper's frame (X lateral right = -vy, Y forward = vx, Phi = wz; theta_1 =
+# right wheel, theta_2 = left wheel, theta_s = -turret_joint), for
+# r = 0.05, a = 0.2, b = 0.1 (B_IS_HALF_A), so r/(2a) = 0.125, r b/(2a) = 0.0125:
+#
+# * strafe left vy = 0.1 at theta_s = 0 (s = 0, c = 1): X = -0.1, Y = Phi = 0.
+#   Row 2: Y = r/2 (wR + wL) = 0 -> wL = -wR. Row 1: X = -r b/(2a) (wR - wL)
+#   = -0.025 wR = -0.1 -> wR = 4, wL = -4. Row 3: Phi = r/(2a) (wR - wL) -
+#   theta_s_dot = 1 - theta_s_dot = 0 -> theta_s_dot = 1, turret rate -1 rad/s.
+#   (Dividing by a instead of b would give wheels -+2 rad/s, turret -0.5.)
+# * forward vx = 0.2 with the drive base turned 90 deg left of the turret
+#   (turret_joint = -pi/2, theta_s = pi/2, s = 1, c = 0): X = 0, Y = 0.2.
+#   Row 1: X = -r a/(2a) wR - r a/(2a) wL = -0.025 (wR + wL) = 0 -> wL = -wR.
+#   Row 2: Y = -r b/(2a) wR + r b/(2a) wL = -0.0125 * 2 wR = 0.2 -> wR = -8,
+#   wL = 8. Row 3: Phi = 0.125 (-16) - theta_s_dot = 0 -> theta_s_dot = -2,
+#   turret rate +2 rad/s: the drive base turns clockwise at 2 rad/s = vx / b.
+# * spin in place wz = 1: the turret axis must not move, so the wheels stand
+#   still and the turret turns at 1 rad/s, for any a and b.
+@pytest.mark.parametrize("phi, twist, expected", [
+    (0.0, (0.0, 0.1, 0.0), (-4.0, 4.0, -1.0)),
+    (-math.pi / 2, (0.2, 0.0, 0.0), (8.0, -8.0, 2.0)),
+    (0.7, (0.0, 0.0, 1.0), (0.0, 0.0, 1.0)),
+])
+def test_inverse_with_unequal_separation_and_offset_matches_hand_derivation(phi, twist, expected):
+    kin = OffsetTurretKinematics(**B_IS_HALF_A)
+    np.testing.assert_allclose(kin.inverse(np.array([0.0, 0.0, phi]), np.array(twist)),
+                               expected, atol=1e-12)
+    # and the forward map takes the rates back to the twist
+    np.testing.assert_allclose(kin.forward(np.array([0.0, 0.0, phi]), np.array(expected)),
+                               twist, atol=1e-12)

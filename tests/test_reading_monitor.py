@@ -7,6 +7,7 @@ import pytest
 from holonomic_core.controller import ControllerState
 from holonomic_core.driver import JointReading
 from holonomic_core.mock_driver import MockDriver
+from holonomic_core.monitor import MonitorLimits, ReadingMonitor
 
 from test_controller_core import arm, make, run
 
@@ -127,3 +128,97 @@ def test_a_long_loop_stall_integrates_the_motion_without_a_fault(moving):
     assert ctrl.state is ControllerState.ARMED
     assert np.linalg.norm(ctrl.odometry.pose[:2] - pose[:2]) == pytest.approx(
         0.4 * (0.2 + ctrl.dt), rel=0.05)
+
+
+def test_samples_bunched_by_a_loop_stall_are_motion_not_a_glitch():
+    """A control loop that stalls 100 ms, then runs its catch-up cycle 0.7 ms
+    later (ControlLoop does one at once after an overrun). A drive's sample
+    taken at the last SYNC before the stall is handled late, after the next
+    SYNC, so the host stamps it with that SYNC; the next sample, 0.7 ms of
+    stamps later, carries the whole stall's motion. On a real bus under load
+    (the CiA 402 rig with two busy CPUs beside it) this was a false "encoder
+    glitch: position jumped by 0.21 rad in 0.7 ms" that stopped the base."""
+    period, speed = 0.005, 10.0                     # one joint at half its 20 rad/s limit
+    # the safety.* defaults of the controller's schema
+    monitor = ReadingMonitor(["wheel"], [20.0], period, MonitorLimits(3.0, 0.05, 0.3, 0.5))
+
+    def check(now, stamp, sampled_at):
+        return monitor.check(JointReading(stamp, [speed * sampled_at], [speed], []), now)
+
+    for k in range(10):                             # steady 200 Hz, stamps on time
+        assert check(k * period, k * period, k * period) is None
+    last = 9 * period
+    # the stall: the sample of t = last is stamped with the SYNC after the stall
+    assert check(last + 0.1, last + 0.1, last) is None
+    # catch-up cycle 0.7 ms later: 10 rad/s * 0.1 s = 1 rad "in 0.7 ms", over
+    # the period's bound of 3 * 20 rad/s * 5 ms = 0.3 rad, within the stall's
+    # 3 * 20 * 0.1 = 6 rad
+    assert check(last + 0.1007, last + 0.1007, last + 0.1) is None
+    # a real glitch right after the stall is still one (50 rad > 6 rad) ...
+    glitch = monitor.check(JointReading(last + 0.1057, [50.0], [speed], []), last + 0.1057)
+    assert glitch is not None and "position jumped" in glitch
+
+
+@pytest.mark.parametrize("checks_after_stall, glitch", [(3, False), (4, True)])
+def test_a_stall_widens_the_glitch_bound_for_four_checks(checks_after_stall, glitch):
+    """The check that sees a 100 ms gap and the next three (four: 20 ms at
+    200 Hz, time for samples queued during the stall to come in) allow the
+    stall's motion; the fourth check after it is back to the period's bound
+    (3 * 20 rad/s * 5 ms = 0.3 rad): a 1 rad jump is a glitch again."""
+    period = 0.005
+    monitor = ReadingMonitor(["wheel"], [20.0], period, MonitorLimits(3.0, 0.05, 0.3, 0.5))
+    t = 0.0
+    for _ in range(5):
+        assert monitor.check(JointReading(t, [0.0], [0.0], []), t) is None
+        t += period
+    t += 0.1                                        # the stall
+    assert monitor.check(JointReading(t, [0.0], [0.0], []), t) is None
+    for _ in range(checks_after_stall - 1):
+        t += period
+        assert monitor.check(JointReading(t, [0.0], [0.0], []), t) is None
+    t += period
+    problem = monitor.check(JointReading(t, [1.0], [0.0], []), t)
+    assert (problem is not None and "position jumped by 1 rad" in problem) == glitch, problem
+
+
+def test_monitor_limits_cannot_change_under_a_running_monitor():
+    limits = MonitorLimits(3.0, 0.05, 0.3, 0.5)
+    with pytest.raises(AttributeError):
+        limits.velocity_factor = 100.0            # frozen: a config, not state
+
+
+@pytest.mark.parametrize("measured, faults", [(5.0, False), (3.0, True)])
+def test_tracking_error_faults_only_over_its_fraction_of_the_limit(measured, faults):
+    """tracking_error 0.3 of a 20 rad/s limit = 6 rad/s: a joint told 10 rad/s
+    that turns at 5 (5 off) follows; at 3 (7 off) it cannot, once
+    that has lasted tracking_timeout (0.5 s)."""
+    period = 0.005
+    monitor = ReadingMonitor(["wheel"], [20.0], period, MonitorLimits(3.0, 0.05, 0.3, 0.5))
+    command = np.array([10.0])
+    problems = []
+    for k in range(121):                             # 0.6 s > tracking_timeout
+        t = k * period
+        problems.append(monitor.check(JointReading(t, [measured * t], [measured], []), t,
+                                      command))
+    assert all(p is None for p in problems[:100])    # the first 0.5 s: never
+    late = [p for p in problems[100:] if p is not None]
+    assert bool(late) == faults, late
+    if faults:
+        assert "wheel: cannot follow its command (10 rad/s commanded, 3 rad/s" in late[0]
+
+
+@pytest.mark.parametrize("positions, velocities, sizes", [
+    ([0.0, 0.0], [0.0, 0.0, 0.0], (2, 3)), ([0.0, 0.0, 0.0], [0.0], (3, 1)),
+    (0.0, 0.0, (0, 0))])                                    # scalars: no joints at all
+def test_a_reading_of_the_wrong_size_is_named(positions, velocities, sizes):
+    monitor = ReadingMonitor(["a", "b", "c"], [1.0, 1.0, 1.0], 0.005,
+                             MonitorLimits(3.0, 0.05, 0.3, 0.5))
+    problem = monitor.check(JointReading(0.0, positions, velocities, []), 0.0)
+    assert problem == (f"driver returned {sizes[0]} positions and {sizes[1]} "
+                       "velocities for 3 joints")
+
+
+def test_a_zero_reading_timeout_disables_the_frozen_check():
+    monitor = ReadingMonitor(["a"], [1.0], 0.005, MonitorLimits(3.0, 0.0, 0.3, 0.5))
+    for k in range(100):                    # the same stamp for 0.5 s
+        assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.0 + k * 0.005) is None

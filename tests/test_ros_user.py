@@ -5,6 +5,7 @@ file, and parameter docs that match the code."""
 from __future__ import annotations
 
 import ast
+import contextlib
 import os
 import subprocess
 import sys
@@ -16,7 +17,8 @@ import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from ros_probe import Bringup, Probe, Teleop, claim_domain_id, relative_pose, wait_until
+from ros_probe import (Bringup, Probe, Teleop, claim_domain_id, relative_pose, spin_in_thread,
+                       wait_until)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -190,33 +192,59 @@ def test_fleet_arguments_that_make_no_sense_are_refused(tmp_path):
 
 
 # -- DDS domains -------------------------------------------------------------------------------
+@contextlib.contextmanager
+def node_in_domain(domain_id: int, name: str):
+    """An rclpy node in another ROS domain (its own context), spun in a thread."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node(name, context=context)
+    stop = spin_in_thread(node, context)
+    try:
+        yield node
+    finally:
+        stop()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
 def test_teleop_in_the_robots_domain_drives_it_and_another_domain_cannot(ros, tmp_path):
     """Two processes in one domain talk (teleop -> robot); a publisher in
     another domain (this test process) is not heard."""
-    other = str(claim_domain_id())
+    other = claim_domain_id()
     bag = tmp_path / "other.mcap"
     robot = Bringup(["hamr", "--namespace", "dom", "--enable", "--record", str(bag)],
-                    tmp_path / "robot.log", env={"ROS_DOMAIN_ID": other})
+                    tmp_path / "robot.log", env={"ROS_DOMAIN_ID": str(other)})
     probe = Probe(ros, "dom")                        # this process: the test's own domain
     teleop = None
-    try:
-        time.sleep(4.0)                              # the robot is up (in its domain)
-        assert probe.cmd_pub.get_subscription_count() == 0
-        probe.drive((0.5, 0.0, 0.0), 1.5)            # unheard
-        env_before = os.environ["ROS_DOMAIN_ID"]
-        os.environ["ROS_DOMAIN_ID"] = other          # the teleop process inherits it
+    with node_in_domain(other, "other_domain_watcher") as watcher_node:
+        watcher = Probe(watcher_node, "dom")         # a witness in the robot's domain
         try:
-            teleop = Teleop("--namespace", "dom", "--speed", "0.4")
+            # the robot is up and has matched a cmd_vel publisher in its own
+            # domain: had our domain been the same, it would hear us now
+            watcher.wait_ready()
+            assert probe.cmd_pub.get_subscription_count() == 0
+            probe.drive((0.5, 0.0, 0.0), 1.5)        # unheard
+            env_before = os.environ["ROS_DOMAIN_ID"]
+            os.environ["ROS_DOMAIN_ID"] = str(other)  # the teleop process inherits it
+            try:
+                teleop = Teleop("--namespace", "dom", "--speed", "0.4")
+            finally:
+                os.environ["ROS_DOMAIN_ID"] = env_before
+            # hold J (strafe left at 0.4 m/s) until the robot has gone 0.5 m:
+            # however long the teleop takes to discover the robot
+            deadline = time.monotonic() + 30.0
+            while watcher.latest_truth().pose[1] <= 0.5:
+                assert time.monotonic() < deadline, "the teleop never drove the robot"
+                teleop.hold("J", 0.2)
+            watcher.wait_at_rest(timeout=10.0)
         finally:
-            os.environ["ROS_DOMAIN_ID"] = env_before
-        time.sleep(3.0)                              # discovery
-        teleop.hold("J", 2.0)
-        time.sleep(1.5)
-    finally:
-        if teleop is not None:
-            assert teleop.stop() == 0
-        probe.close()
-        assert robot.stop() == 0, robot.log()
+            if teleop is not None:
+                assert teleop.stop() == 0
+            watcher.close()
+            probe.close()
+            assert robot.stop() == 0, robot.log()
     topics, _ = read_recording(bag)
     commands = topics.get("/dom/cmd_vel", [])
     assert commands and all(m.linear.x == 0.0 for m in commands)   # none from this domain
@@ -239,15 +267,34 @@ def test_launch_file_mirrors_the_bringup_arguments():
     bringup = parse_args(["hamr", "--driver", "mock", "--namespace", "n",
                           "--params-file", str(ROOT / "config" / "hamr.yaml"), "--enable"])
     assert {"driver", "namespace", "params_file", "enable", "robot"} <= set(vars(bringup))
-    try:
-        import launch_ros  # noqa: F401  (only on a full ROS install)
-    except ImportError:
-        return
+
+
+def test_launch_file_starts_the_base_controller_with_the_arguments_given():
+    """Evaluates the launch description as `ros2 launch` would. launch and
+    launch_ros are not on PyPI (only in a full ROS 2 install), so this runs
+    only where a full ROS 2 Jazzy is sourced."""
+    pytest.importorskip("launch", reason="launch is not on PyPI: needs a full ROS 2 install")
+    pytest.importorskip("launch_ros",
+                        reason="launch_ros is not on PyPI: needs a full ROS 2 install")
     import importlib.util
+
+    from launch import LaunchContext
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction
+
+    path = ROOT / "src" / "holonomic_bringup" / "launch" / "bringup.launch.py"
     spec = importlib.util.spec_from_file_location("bringup_launch", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    assert module.generate_launch_description().entities
+    description = module.generate_launch_description()
+    declared = {e.name: e for e in description.entities if isinstance(e, DeclareLaunchArgument)}
+    assert set(declared) == {"robot", "driver", "namespace", "params_file", "enable"}
+    context = LaunchContext()
+    context.launch_configurations.update({"robot": "xr4000", "driver": "mock",
+                                          "namespace": "/left/", "params_file": "",
+                                          "enable": "true"})
+    opaque = next(e for e in description.entities if isinstance(e, OpaqueFunction))
+    (node,) = opaque.execute(context)
+    assert node.node_package == "holonomic_bringup" and node.node_executable == "base_controller"
 
 
 def test_launch_file_keeps_an_exported_discovery_range():

@@ -77,6 +77,7 @@ def rig():
 
 
 def assert_stopped_then_recovers(rig, what):
+    assert what, "name the fault text the user sees"
     assert rig.ctrl.state is ControllerState.FAULT and what in rig.ctrl.fault, rig.ctrl.fault
     assert not rig.driver.armed
     rig.run((0.5, 0.0, 0.0), 1.0)          # commands are ignored while faulted
@@ -103,7 +104,7 @@ def test_a_base_pinned_in_place_saturates_the_motors_and_faults(rig):
     pb.removeConstraint(pin, physicsClientId=cid)
     for link in wheels:
         pb.changeDynamics(body, link, lateralFriction=1.0, physicsClientId=cid)
-    assert_stopped_then_recovers(rig, "")
+    assert_stopped_then_recovers(rig, "cannot follow its command")
 
 
 def test_an_encoder_spike_faults_and_the_odometry_does_not_jump(rig):
@@ -122,7 +123,7 @@ def test_an_encoder_spike_faults_and_the_odometry_does_not_jump(rig):
     # encoder sees, but the odometry stays within centimetres of the truth
     truth, odo = rig.driver.ground_truth().pose, rig.ctrl.odometry.pose
     assert np.linalg.norm(truth[:2] - odo[:2]) < 0.05
-    assert_stopped_then_recovers(rig, "")
+    assert_stopped_then_recovers(rig, "left_wheel_joint: velocity reading")
 
 
 def test_a_joint_that_stops_reporting_faults(rig):
@@ -132,7 +133,7 @@ def test_a_joint_that_stops_reporting_faults(rig):
     assert rig.ctrl.state is ControllerState.FAULT
     rig.run(None, 1.0)
     rig.driver.freeze = False
-    assert_stopped_then_recovers(rig, "")
+    assert_stopped_then_recovers(rig, "joint readings stopped updating")
 
 
 def test_a_drive_fault_mid_motion_stops_the_base(rig):

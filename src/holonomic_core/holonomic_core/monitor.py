@@ -13,6 +13,7 @@ odometry.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,16 +25,18 @@ class MonitorLimits:
 
     ``velocity_factor`` [-]: a measured joint speed above this multiple of the
     joint's speed limit is a glitch (position increments are held to the same
-    bound); ``reading_timeout`` [s]: readings whose stamp has not advanced for
-    this long are frozen; ``tracking_error`` [-]: a joint whose measured speed
+    bound over the time between samples: at least the period, or the last
+    stall of the control loop); ``reading_timeout`` [s]: readings whose stamp
+    has not advanced for this long are frozen; ``tracking_error`` [-]: a joint whose measured speed
     differs from its command by more than this fraction of its speed limit ...
     ``tracking_timeout`` [s]: ... for this long cannot follow (0 disables).
     """
 
-    velocity_factor: float = 3.0
-    reading_timeout: float = 0.05
-    tracking_error: float = 0.3
-    tracking_timeout: float = 0.5
+    # no defaults here: the controller's ParamSpec schema (safety.*) has them
+    velocity_factor: float
+    reading_timeout: float
+    tracking_error: float
+    tracking_timeout: float
 
 
 class ReadingMonitor:
@@ -42,6 +45,9 @@ class ReadingMonitor:
     ``joint_names`` and ``max_velocity`` [rad/s] in joint order;
     ``period`` [s]: the control period.
     """
+
+    #: checks over which a stall of the caller's loop widens the glitch bound
+    STALL_MEMORY = 4
 
     def __init__(self, joint_names, max_velocity, period: float, limits: MonitorLimits):
         self.joint_names = tuple(joint_names)
@@ -59,6 +65,8 @@ class ReadingMonitor:
         self._last_stamp: float | None = None
         self._stamp_changed_at: float | None = None
         self._tracking_since: float | None = None
+        self._last_check: float | None = None
+        self._gaps: deque[float] = deque(maxlen=self.STALL_MEMORY)
 
     def check(self, reading, now: float, command: np.ndarray | None = None) -> str | None:
         """Return why ``reading`` is implausible, or None.
@@ -68,6 +76,9 @@ class ReadingMonitor:
         An implausible reading does not become the reference for the next one.
         """
         n = len(self.joint_names)
+        if self._last_check is not None:
+            self._gaps.append(now - self._last_check)
+        self._last_check = now
         positions = np.asarray(reading.positions, float)
         velocities = np.asarray(reading.velocities, float)
         if positions.shape != (n,) or velocities.shape != (n,):
@@ -92,7 +103,15 @@ class ReadingMonitor:
                 # the clock restarted (simulation reset): a new reference
                 self._accept(pos, reading.stamp, now)
                 return None
-            span = max(dt, self.period)
+            # The bound holds over the time between the device's samples,
+            # which the stamps understate when the host stamps samples late:
+            # after a stall of this loop, a sample taken before the stall can
+            # be stamped after it (e.g. a TPDO handled after the next SYNC),
+            # and the next one, a catch-up cycle later, then carries the
+            # whole stall's motion over a fraction of a period. So the span
+            # is at least the period and the longest gap between the last
+            # few checks (a stall widens the bound for STALL_MEMORY cycles).
+            span = max(dt, self.period, max(self._gaps, default=0.0))
             last = self._last_positions
             for i in range(n):
                 jump = abs(pos[i] - last[i])

@@ -68,6 +68,7 @@ import os
 import struct
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Callable
 
@@ -317,6 +318,8 @@ class Cia402Driver(CanDriver):
         self._nodes: dict[int, canopen.RemoteNode] = {}
         self._next_master_heartbeat = -math.inf
         self._sync_time = -math.inf
+        #: (wall clock, driver clock) [s] of the last SYNCs sent, newest last
+        self._syncs: deque[tuple[float, float]] = deque(maxlen=16)
         self.counters = {"bad_frames": 0, "emcy": 0, "syncs": 0, "frames_sent": 0}
 
     def _eds_key(self, i: int) -> str:
@@ -793,13 +796,17 @@ class Cia402Driver(CanDriver):
     def _cycle_frames(self, now: float) -> None:
         """SYNC every cycle (the drives sample and answer); the master
         heartbeat and the node guarding requests when due."""
-        self._sync_time = now
         if now >= self._next_master_heartbeat:
             self._next_master_heartbeat = now + self._heartbeat_period
             self._send(co.HEARTBEAT + self._master_id, bytes([co.NmtState.OPERATIONAL]))
             for node, kind in self._watchdog_kind.items():
                 if kind == "guarding":
                     self._send(co.HEARTBEAT + node, b"", remote=True)
+        # both clocks as the SYNC leaves (the drives sample then)
+        sent = time.monotonic()
+        self._sync_time = sent
+        with self._lock:
+            self._syncs.append((time.time(), sent))
         self._send(co.SYNC, b"")
         self.counters["syncs"] += 1
 
@@ -860,7 +867,9 @@ class Cia402Driver(CanDriver):
             self._network = None
 
     # -- receive (canopen's notifier thread) ---------------------------------------------------
-    def on_frame(self, cob_id: int, data: bytes) -> None:
+    def on_frame(self, cob_id: int, data: bytes, timestamp: float | None = None) -> None:
+        """A frame from the bus; ``timestamp`` [s, wall clock]: when it arrived
+        (python-can's, from the kernel on socketcan), if known."""
         entries = self._cob.get(cob_id)
         if entries is None:
             return
@@ -868,7 +877,10 @@ class Cia402Driver(CanDriver):
         try:
             with self._lock:
                 for i, handler in entries:
-                    handler(i, bytes(data), now)
+                    if handler == self._on_feedback:
+                        handler(i, bytes(data), now, self._answered_sync(timestamp))
+                    else:
+                        handler(i, bytes(data), now)
         except (struct.error, ValueError, KeyError):
             self.counters["bad_frames"] += 1
             return
@@ -886,12 +898,25 @@ class Cia402Driver(CanDriver):
             offset += n
         return values
 
-    def _on_feedback(self, i: int, data: bytes, now: float) -> None:
+    def _answered_sync(self, arrived: float | None) -> float:
+        """Driver-clock time of the SYNC a TPDO that arrived at ``arrived``
+        [s, wall clock] answers: the last one sent before it arrived. (The
+        last SYNC sent *now* is wrong for an answer handled late -- this
+        thread starved, frames queued: that sample would be stamped a cycle
+        or a stall late, and the next one would seem to move that far in no
+        time.) Without an arrival time: the last SYNC sent."""
+        if arrived:
+            for wall, clock in reversed(self._syncs):
+                if wall <= arrived:
+                    return clock
+        return self._sync_time
+
+    def _on_feedback(self, i: int, data: bytes, now: float, sampled: float) -> None:
         d = self._drives[i]
         d.position, d.velocity = self._decode(i, self._wiring[i].feedback, data)
         d.feedback_time = now
-        # the drive sampled these at the SYNC they answer: the last one sent
-        d.sample_time = self._sync_time
+        # the drive sampled these at the SYNC they answer
+        d.sample_time = sampled
 
     def _on_status(self, i: int, data: bytes, now: float) -> None:
         d = self._drives[i]
@@ -927,7 +952,7 @@ class _FrameListener(can.Listener):
             self._driver.counters["bad_frames"] += 1
             return
         if not msg.is_extended_id and not msg.is_remote_frame:
-            self._driver.on_frame(msg.arbitration_id, msg.data)
+            self._driver.on_frame(msg.arbitration_id, msg.data, msg.timestamp)
 
     def stop(self) -> None:
         pass

@@ -129,7 +129,10 @@ class EmulatedCia402Drive:
             motors = [motor]
         if len(motors) != count:
             raise ValueError(f"{count} axes in the dictionary, {len(motors)} motors given")
-        self.bus = can.Bus(interface="virtual", channel=channel)
+        # the device stamps what it sends (preserve_timestamps): a real drive
+        # answers a SYNC within a fraction of a millisecond, whenever this
+        # emulator's thread gets to run on a busy test machine
+        self.bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
         self.network = _DeviceNetwork(self.bus)
         self.node = canopen.LocalNode(node_id, od)
         self.network.add_node(self.node)
@@ -323,7 +326,7 @@ class EmulatedCia402Drive:
             if len(data) == 2 and data[1] in (0, self.node_id):
                 self._on_nmt(data[0])
         elif cob == co.SYNC:
-            self._on_sync()
+            self._on_sync(now)
         elif cob == co.SDO_RX + self.node_id:
             if self.nmt != co.NmtState.STOPPED and not self.sdo_silent:
                 self.network.notify(cob, data, now)
@@ -415,7 +418,11 @@ class EmulatedCia402Drive:
             except SdoAbortedError:
                 pass            # e.g. a mode the drive does not have: ignored
 
-    def _on_sync(self) -> None:
+    #: [s] from a SYNC to the drive's answer on the bus
+    ANSWER_DELAY = 1e-4
+
+    def _on_sync(self, at: float) -> None:
+        """The SYNC sent at ``at`` [s, wall clock]: apply the RPDOs, sample, answer."""
         pending, self._pending = self._pending, {}
         self._apply(pending)
         if self.nmt != co.NmtState.OPERATIONAL:
@@ -430,7 +437,10 @@ class EmulatedCia402Drive:
             if not 1 <= kind <= 240 or self._syncs % kind:
                 continue
             payload = b"".join(self.node.get_data(i, s) for i, s, _ in entries)
-            self.network.send_message(cob, payload)
+            # stamped as a real drive's answer leaves the bus, not when this
+            # thread got to run
+            self.bus.send(can.Message(arbitration_id=cob, data=payload, is_extended_id=False,
+                                      timestamp=at + self.ANSWER_DELAY))
 
     def _on_controlword(self, axis: _Axis, word: int) -> None:
         previous, axis.controlword = axis.controlword, word

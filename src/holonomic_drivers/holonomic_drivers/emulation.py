@@ -120,7 +120,10 @@ class EmulatedDevice:
     def __init__(self, channel: str, max_acceleration: float, motor=None):
         """``max_acceleration`` [motor rev/s^2] of the default :class:`IdealMotor`;
         ``motor``: another motor (see the module docstring)."""
-        self.bus = can.Bus(interface="virtual", channel=channel)
+        # the device stamps what it sends (preserve_timestamps): a real drive
+        # answers within a fraction of a millisecond, whenever this emulator's
+        # thread gets to run on a busy test machine
+        self.bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
         self.motor = motor if motor is not None else IdealMotor(max_acceleration * TWO_PI)
         #: no frame at all leaves the device (unplugged, dead CPU)
         self.silent = False
@@ -166,9 +169,11 @@ class EmulatedDevice:
         self.command_motor(now)
         self.motor.advance(dt)
 
-    def send(self, arbitration_id: int, data: bytes) -> None:
+    def send(self, arbitration_id: int, data: bytes, at: float | None = None) -> None:
+        """Send a frame stamped ``at`` [s, wall clock] (default: now)."""
         self.bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                  is_extended_id=False))
+                                  is_extended_id=False,
+                                  timestamp=time.time() if at is None else at))
 
     def close(self) -> None:
         self.bus.shutdown()

@@ -1,0 +1,128 @@
+"""The fixed-rate loop and its statistics (holonomic_core.loop), without
+timing assertions: what a cycle does, errors, stopping, counting."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from holonomic_core.loop import ControlLoop, LoopStats, ManualClock
+
+
+def test_manual_clock_reads_what_its_owner_set():
+    clock = ManualClock(2.5)
+    assert clock() == 2.5
+    clock.now += 0.005
+    assert clock() == 2.505
+    assert ManualClock()() == 0.0
+
+
+def test_loop_stats_summary_over_the_window_and_since_start():
+    stats = LoopStats(window=4)
+    assert stats.summary() == {"rate_hz": 0.0, "period_p50_ms": 0.0, "period_p99_ms": 0.0,
+                               "period_window_max_ms": 0.0, "period_max_ms": 0.0,
+                               "compute_p99_ms": 0.0, "overruns": 0}
+    # six cycles in a window of four: the 9 ms period (second) leaves the
+    # window but stays the maximum since start
+    for period, compute in ((0.005, 0.001), (0.009, 0.002), (0.004, 0.001),
+                            (0.006, 0.003), (0.005, 0.001), (0.004, 0.0005)):
+        stats.add(period, compute)
+    stats.overruns = 2
+    s = stats.summary()
+    # the window holds the last four periods: 4, 6, 5, 4 ms (mean 4.75 ms)
+    assert stats.count == 6
+    assert s["rate_hz"] == pytest.approx(1.0 / 0.00475)          # 1 / mean(window)
+    assert s["period_p50_ms"] == pytest.approx(4.5)                # median of 4, 4, 5, 6
+    # numpy's linear percentile: p99 of (4, 4, 5, 6) = 5 + 0.97 * (6 - 5)
+    assert s["period_p99_ms"] == pytest.approx(5.97)
+    assert s["period_window_max_ms"] == pytest.approx(6.0)
+    assert s["period_max_ms"] == pytest.approx(9.0)
+    assert s["compute_p99_ms"] == pytest.approx(
+        1e3 * np.percentile([0.001, 0.003, 0.001, 0.0005], 99))
+    assert s["overruns"] == 2
+
+
+def test_a_period_that_is_not_positive_is_refused():
+    for period in (0.0, -0.01):
+        with pytest.raises(ValueError, match="period must be > 0"):
+            ControlLoop(period, lambda: None)
+
+
+def _run_until(loop, done: threading.Event, timeout: float = 30.0):
+    loop.start()
+    assert done.wait(timeout), "the loop did not run its cycles"
+
+
+def test_the_loop_steps_until_stopped_and_stops_promptly():
+    cycles = []
+    done = threading.Event()
+
+    def step():
+        cycles.append(1)
+        if len(cycles) == 20:
+            done.set()
+
+    loop = ControlLoop(0.002, step, name="test_loop")
+    _run_until(loop, done)
+    assert loop.running
+    assert loop.stop() is True and not loop.running
+    n = len(cycles)
+    assert n >= 20
+    # statistics: one period per cycle after the first
+    assert loop.stats.count == n - 1
+
+
+def test_an_error_the_owner_accepts_keeps_the_loop_running():
+    errors, cycles = [], []
+    done = threading.Event()
+
+    def step():
+        cycles.append(1)
+        if len(cycles) == 3:
+            raise RuntimeError("one bad cycle")
+        if len(cycles) == 10:
+            done.set()
+
+    loop = ControlLoop(0.002, step, on_error=lambda exc: errors.append(exc) or True)
+    _run_until(loop, done)
+    loop.stop()
+    assert len(cycles) >= 10
+    assert [str(e) for e in errors] == ["one bad cycle"]
+
+
+@pytest.mark.parametrize("handler", [None, lambda exc: False])
+def test_an_error_the_owner_refuses_or_does_not_handle_ends_the_loop(handler):
+    cycles = []
+
+    def step():
+        cycles.append(1)
+        raise RuntimeError("broken")
+
+    loop = ControlLoop(0.002, step, on_error=handler)
+    loop.start()
+    deadline = time.monotonic() + 30.0
+    while loop.running and time.monotonic() < deadline:
+        time.sleep(0.01)                          # poll: the loop ends by itself
+    assert not loop.running
+    assert cycles == [1]
+    assert loop.stop() is True
+
+
+def test_a_stalled_cycle_counts_as_an_overrun():
+    cycles = []
+    done = threading.Event()
+    release = threading.Event()
+
+    def step():
+        cycles.append(1)
+        if len(cycles) == 5:
+            release.wait(0.2)             # stall: 0.2 s = 100 periods of 2 ms
+        if len(cycles) == 10:
+            done.set()
+
+    loop = ControlLoop(0.002, step)
+    _run_until(loop, done)
+    loop.stop()
+    assert loop.stats.overruns >= 1
+    assert loop.stats.max_period >= 0.2
