@@ -78,7 +78,7 @@ CASES = [
      "sim.physics_rat", "did you mean 'sim.physics_rate'? Valid keys of section 'sim': "),
     ("misspelt required key", mutate(r"turret_offset: 0.1641", "turet_offset: 0.1641"),
      "ddrot.turet_offset", "did you mean 'ddrot.turret_offset'? Valid keys of section 'ddrot': "
-     "half_wheel_separation, turret_offset, wheel_radius"),
+     "half_wheel_separation, left_wheel_radius, right_wheel_radius, turret_offset, wheel_radius"),
     ("misspelt section", mutate(r"^    ddrot:", "    ddrott:"),
      "ddrott.wheel_radius", "did you mean 'ddrot.wheel_radius'? Known sections: "),
 ]

@@ -217,6 +217,10 @@ class _Drive:
     velocity: int = 0
     feedback_time: float = -math.inf
     sample_time: float = -math.inf
+    #: the sample before (position, velocity, sample_time): a reading takes
+    #: every drive at one SYNC, and a drive whose next answer came early is
+    #: read at the previous one
+    previous: tuple[int, int, float] = (0, 0, -math.inf)
     statusword: int = 0
     error_code: int = 0
     status_time: float = -math.inf
@@ -320,6 +324,8 @@ class Cia402Driver(CanDriver):
         self._sync_time = -math.inf
         #: (wall clock, driver clock) [s] of the last SYNCs sent, newest last
         self._syncs: deque[tuple[float, float]] = deque(maxlen=16)
+        #: the last reading returned (a cycle with nothing new repeats it)
+        self._last_reading: JointReading | None = None
         self.counters = {"bad_frames": 0, "emcy": 0, "syncs": 0, "frames_sent": 0}
 
     def _eds_key(self, i: int) -> str:
@@ -703,15 +709,26 @@ class Cia402Driver(CanDriver):
                 detail = (f", error code 0x{d.error_code or d.emcy_code:04X}"
                           if state in (State.FAULT, State.FAULT_REACTION_ACTIVE) else "")
                 raise DriverFault(f"left OPERATION ENABLED (now {state.value}{detail})", device)
-            positions[i] = d.position
-            velocities[i] = d.velocity
-        # stamped with the SYNC at which the drives sampled; a cycle whose
-        # PDOs have not arrived yet repeats the stamp (the odometry then
-        # waits for them instead of seeing a standstill)
-        return JointReading(max(d.sample_time for d in drives),
-                            self.joints.to_joint_positions(positions / self._counts_per_rev),
-                            self.joints.to_joint_velocities(velocities / self._vel_units_per_rev_s),
-                            self._no_efforts)
+        # One SYNC for every joint: the newest one all drives have answered.
+        # A drive whose answer to the next SYNC is already in is read at its
+        # previous sample -- mixing samples of two SYNCs under one stamp would
+        # show the early drives moving in no time. A cycle whose PDOs have not
+        # arrived yet repeats the stamp (the odometry waits for them instead
+        # of seeing a standstill).
+        stamp = min(d.sample_time for d in drives)
+        last = self._last_reading
+        if last is not None and stamp <= last.stamp:
+            return last             # no SYNC answered by all drives since: nothing new
+        for i, d in enumerate(drives):
+            if d.sample_time > stamp and d.previous[2] <= stamp:
+                positions[i], velocities[i] = d.previous[0], d.previous[1]
+            else:
+                positions[i], velocities[i] = d.position, d.velocity
+        self._last_reading = JointReading(
+            stamp, self.joints.to_joint_positions(positions / self._counts_per_rev),
+            self.joints.to_joint_velocities(velocities / self._vel_units_per_rev_s),
+            self._no_efforts)
+        return self._last_reading
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
         motor = self.joints.to_motor_velocities(np.asarray(velocities, float))
@@ -913,7 +930,10 @@ class Cia402Driver(CanDriver):
 
     def _on_feedback(self, i: int, data: bytes, now: float, sampled: float) -> None:
         d = self._drives[i]
-        d.position, d.velocity = self._decode(i, self._wiring[i].feedback, data)
+        position, velocity = self._decode(i, self._wiring[i].feedback, data)
+        if sampled != d.sample_time:
+            d.previous = (d.position, d.velocity, d.sample_time)
+        d.position, d.velocity = position, velocity
         d.feedback_time = now
         # the drive sampled these at the SYNC they answer
         d.sample_time = sampled

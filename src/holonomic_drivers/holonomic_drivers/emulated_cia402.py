@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -86,6 +87,16 @@ class _DeviceNetwork(canopen.Network):
 
     def send_periodic(self, can_id, data, period, remote=False):
         return _NoTask()
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False,
+                     at: float | None = None) -> None:
+        """canopen's send, stamped ``at`` [s, wall clock] (default: now): the
+        device's bus preserves the sender's stamps (a SYNC answer carries
+        the time a real drive would have sent it)."""
+        msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
+                          is_remote_frame=remote, timestamp=time.time() if at is None else at)
+        with self.send_lock:
+            self.bus.send(msg)
 
 
 class _NoTask:
@@ -439,8 +450,7 @@ class EmulatedCia402Drive:
             payload = b"".join(self.node.get_data(i, s) for i, s, _ in entries)
             # stamped as a real drive's answer leaves the bus, not when this
             # thread got to run
-            self.bus.send(can.Message(arbitration_id=cob, data=payload, is_extended_id=False,
-                                      timestamp=at + self.ANSWER_DELAY))
+            self.network.send_message(cob, payload, at=at + self.ANSWER_DELAY)
 
     def _on_controlword(self, axis: _Axis, word: int) -> None:
         previous, axis.controlword = axis.controlword, word
