@@ -20,8 +20,12 @@ from ros_probe import Bringup, Probe, drive_script, wait_until
 
 @pytest.fixture(scope="module")
 def hamr(ros, tmp_path_factory):
-    """One simulated HAMR for the module's tests, armed."""
-    proc = Bringup(["hamr"], tmp_path_factory.mktemp("hamr") / "bringup.log")
+    """One simulated HAMR for the module's tests, armed, on ideal motors:
+    these tests time the controller (stops, tracking, odometry) to a few
+    hundredths of a second, and the measured values in their comments are
+    the ideal plant's (the drive model's lag is its own tests' subject)."""
+    proc = Bringup(["hamr", "-p", "sim.ideal_motors:=true"],
+                   tmp_path_factory.mktemp("hamr") / "bringup.log")
     probe = Probe(ros)
     try:
         probe.wait_ready()

@@ -78,7 +78,7 @@ def test_joint_states_and_per_caster_slip_in_diagnostics(pcv, ros):
         for name in model.kinematics.caster_names:
             value = float(keys[f"slip_residual_{name}_m_s"])
             assert 0.0 <= value < 0.05
-        assert keys["estimator"] == "robust"
+        assert keys["estimator"] == "slip_min"
         assert odo.level == DiagnosticStatus.OK      # no caster slipping
     finally:
         ros.destroy_subscription(sub)

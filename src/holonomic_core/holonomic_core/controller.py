@@ -94,9 +94,9 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "Torque mode: velocity gains for (x, y, yaw) [1/s] (2 sqrt(kp): critically "
               "damped).", default=(12.0, 12.0, 12.0), minimum=0.0, maximum=1e3, min_length=3),
     ParamSpec("estimator", "string",
-              "Odometry estimator: robust (slip_min, except that one caster alone disagreeing "
-              "by more than 0.1 m/s is left out), slip_min (C# = Cp+ Cq^-1) or pinv.",
-              default="robust", choices=ESTIMATORS),
+              "Odometry estimator: slip_min (C# = Cp+ Cq^-1), robust (slip_min, except that "
+              "one caster alone disagreeing by more than 0.1 m/s is left out) or pinv.",
+              default="slip_min", choices=ESTIMATORS),
     ParamSpec("odom_frame", "string", "Frame of the odometry (REP 105).", default="odom"),
     ParamSpec("base_frame", "string", "Frame of the base (REP 105).", default="base_link"),
     ParamSpec("frame_prefix", "string",
