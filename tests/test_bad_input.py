@@ -40,6 +40,12 @@ BRINGUP = [
     (["hamr", "--fleet", "two"], "invalid int value: 'two'"),
     (["hamr", "--fleet", "2", "--namespace", "r"], "own namespace"),
     (["hamr", "--fleet", "2", "-p", "control_rate:=fast"], "expected a number"),
+    (["hamr", "--sim-drives"], "--sim-drives needs --driver odrive_can or --driver cia402"),
+    (["hamr", "--driver", "sim", "--sim-drives"], "--sim-drives needs --driver"),
+    (["hamr", "--foxglove", "0"], "--foxglove PORT must be 1..65535"),
+    (["hamr", "--foxglove", "http"], "invalid int value: 'http'"),
+    (["hamr", "--foxglove-allow-control"], "need --foxglove"),
+    (["hamr", "--foxglove-host", "0.0.0.0"], "need --foxglove"),
 ]
 
 TELEOP = [
@@ -103,6 +109,27 @@ TORQUE_EXPERIMENT = [
     (["--markdown", "{file}/x/table.md"], "--markdown: cannot write"),
 ]
 
+DRIVE_TEST = [
+    ([], "the following arguments are required"),
+    (["hamrr", "--joint", "left_wheel_joint"], "did you mean 'hamr'"),
+    (["hamr", "--joint", "nope"], "no joint 'nope' on hamr"),
+    (["hamr", "--joint", "left_wheel_joint", "--amplitude", "x"], "--amplitude"),
+    # a real drive without a confirmation typed at a terminal: nothing moves
+    (["hamr", "--joint", "left_wheel_joint", "--driver", "odrive_can"], "not confirmed"),
+]
+
+CALIBRATE = [
+    ([], "the following arguments are required: robot, recording"),
+    (["hamr", "/nonexistent/run.mcap"], "no such file"),
+    (["hamr", "{junk_mcap}"], "as an MCAP recording"),
+    (["hamr", "{junk_mcap}", "--distance", "-1"], "--distance"),
+]
+
+ODOMETRY_CALIBRATE = [
+    ([], "the following arguments are required: files"),
+    (["/nonexistent/run.mcap"], "/nonexistent/run.mcap"),
+]
+
 #: the base controller node alone (``ros2 run holonomic_bringup base_controller``)
 BASE_CONTROLLER = [
     ([], "robot_config"),
@@ -120,6 +147,9 @@ TABLES = {
     "holonomic-demo": DEMO,
     "holonomic-odometry-experiment": ODOMETRY_EXPERIMENT,
     "holonomic-torque-experiment": TORQUE_EXPERIMENT,
+    "holonomic-drive-test": DRIVE_TEST,
+    "holonomic-calibrate": CALIBRATE,
+    "holonomic-odometry-calibrate": ODOMETRY_CALIBRATE,
     "base_controller": BASE_CONTROLLER,
 }
 CASES = [(program, argv, words) for program, rows in TABLES.items() for argv, words in rows]

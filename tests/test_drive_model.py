@@ -190,7 +190,8 @@ def test_drive_test_on_real_drives_asks_first_and_without_a_terminal_moves_nothi
                            "--driver", driver], stdin=subprocess.DEVNULL,
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2, proc.stderr
-    assert "LIFT THE ROBOT" in proc.stderr and "nothing moved" in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "lift the robot" in lines[0] and "nothing moved" in lines[0]
     assert proc.stdout == ""
 
 

@@ -14,13 +14,14 @@ motion) is one line on stderr and exit status 2.
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
+
+from holonomic_core.command_line import ArgumentParser
 
 #: node key of the overlay: every node of the bringup, under any namespace
 OVERLAY_NODE = "/**"
@@ -79,7 +80,7 @@ def read_recording(path: Path, robot: str, namespace: str | None):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="holonomic-calibrate",
+    parser = ArgumentParser(prog="holonomic-calibrate",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("robot", help="config name or YAML of the recorded robot")
     parser.add_argument("recording", type=Path, help="an MCAP file from holonomic-bringup --record")

@@ -21,13 +21,14 @@ Fit ``sim.drive.*`` to a real drive by running both and matching the figures
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
 import time
 
 import numpy as np
+
+from holonomic_core.command_line import ArgumentParser
 
 #: [s] held at zero before the step (the drives settle) and after it
 _HOLD = 0.3
@@ -43,7 +44,7 @@ def _error(message: str) -> int:
 def parse_args(argv):
     from holonomic_core.driver import DRIVER_REGISTRY
 
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="holonomic-drive-test",
         description="Velocity step on one joint (the others held); prints rise time, "
                     "overshoot, settling time and steady-state error.")
@@ -62,11 +63,11 @@ def parse_args(argv):
 
 
 def _confirm(joint: str, amplitude: float, duration: float) -> bool:
+    if not sys.stdin.isatty():
+        return False            # nobody to ask: refused, nothing moves
     print(f"holonomic-drive-test: LIFT THE ROBOT so that no wheel touches the floor. "
           f"{joint} will turn at {amplitude:g} rad/s for {duration:g} s, the other joints "
           f"are held at zero speed.", file=sys.stderr)
-    if not sys.stdin.isatty():
-        return False
     print("Type 'yes' to start: ", end="", file=sys.stderr, flush=True)
     try:
         return sys.stdin.readline().strip().lower() == "yes"
@@ -145,7 +146,8 @@ def main(argv=None) -> int:
     else:
         rate = cfg.controller.control_rate
         if driver_name in _REAL and not _confirm(args.joint, amplitude, args.duration):
-            return _error("not confirmed (type 'yes' at a terminal): nothing moved")
+            return _error("a real drive moves only after 'yes' typed at a terminal (lift the "
+                          "robot first): not confirmed, nothing moved")
     driver = cfg.driver_class(model, cfg.values, rate)
     try:
         with driver:

@@ -20,14 +20,14 @@ specifies); without one (all zeros) the twist coverage is meaningless.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from holonomic_bringup.recording_plot import _odom_arrays, load
+from holonomic_bringup.recording_plot import odom_arrays, load
+from holonomic_core.command_line import ArgumentParser
 from holonomic_core.controller import config_from_flat
 from holonomic_core.odometry import wrap_angle
 from holonomic_core.schema import ConfigError
@@ -62,7 +62,7 @@ def recording_from_mcap(path: Path, namespace: str = "", reference_topic: str = 
     order = [list(joints[0][1].name).index(j) for j in names]
     stamps = np.array([t for t, _ in joints])
     positions = np.array([np.asarray(m.position)[order] for _, m in joints])
-    t_ref, pose, twist = _odom_arrays(reference)
+    t_ref, pose, twist = odom_arrays(reference)
     # the reference's first pose is the odometry's origin
     x0, y0, th0 = pose[0]
     c, s = math.cos(th0), math.sin(th0)
@@ -84,7 +84,7 @@ def recording_from_mcap(path: Path, namespace: str = "", reference_topic: str = 
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="holonomic-odometry-calibrate",
+    parser = ArgumentParser(prog="holonomic-odometry-calibrate",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("files", nargs="+", type=Path, help="MCAP recordings")
     parser.add_argument("--namespace", default="", help="robot namespace in the recording")

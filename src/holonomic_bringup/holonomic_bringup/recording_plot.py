@@ -50,7 +50,7 @@ def load(path: Path) -> tuple[dict, dict[str, list], dict[str, str]]:
     return robots, series, types
 
 
-def _odom_arrays(samples):
+def odom_arrays(samples):
     t = np.array([s[0] for s in samples])
     pose = np.array([(m.pose.pose.position.x, m.pose.pose.position.y,
                       _yaw(m.pose.pose.orientation)) for _, m in samples])
@@ -122,11 +122,11 @@ def plot_robot(ns: str, flat: dict, series: dict, out: Path, stem: str) -> tuple
     truth = series.get(f"{prefix}/ground_truth/odom", [])
     cmd = series.get(f"{prefix}/cmd_vel", [])
     if odom:
-        t_o, pose_o, tw_o = _odom_arrays(odom)
+        t_o, pose_o, tw_o = odom_arrays(odom)
         fig, (ax, axv) = plt.subplots(1, 2, figsize=(13, 5.5))
         ax.plot(pose_o[:, 0], pose_o[:, 1], "r--", label="odometry")
         if truth:
-            t_g, pose_g, tw_g = _odom_arrays(truth)
+            t_g, pose_g, tw_g = odom_arrays(truth)
             ax.plot(pose_g[:, 0], pose_g[:, 1], "k-", lw=2, alpha=0.7, label="ground truth")
             summary["final_position_error_m"] = float(np.hypot(*(pose_o[-1, :2] - pose_g[-1, :2])))
             summary["final_heading_error_rad"] = abs(math.remainder(pose_o[-1, 2] - pose_g[-1, 2],

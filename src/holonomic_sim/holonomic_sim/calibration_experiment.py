@@ -15,13 +15,13 @@ slip-minimising odometry before and after calibration.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 
 import numpy as np
 
 from holonomic_core.calibration import CalibrationError, calibrate, samples_from_readings
+from holonomic_core.command_line import ArgumentParser
 from holonomic_core.model import load_model
 from holonomic_core.schema import ConfigError
 from holonomic_sim.odometry_experiment import run_trial, simulate
@@ -101,7 +101,7 @@ def odometry_errors(robot: str, sim_seed: int, overlay: dict, seeds: int,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="holonomic-calibration-experiment",
+    parser = ArgumentParser(prog="holonomic-calibration-experiment",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--robot", action="append",
                         help="config name or YAML (repeatable; default xr4000, comr3, hamr)")
