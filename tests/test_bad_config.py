@@ -45,7 +45,7 @@ CASES = [
     ("unknown driver", mutate(r"driver: sim ", "driver: tcp "), "driver", "one of"),
     ("unknown kinematics", mutate(r"kinematics: ddrot", "kinematics: mecanum"),
      "robot.kinematics", "one of"),
-    ("unknown estimator", mutate(r"estimator: robust", "estimator: kalman"),
+    ("unknown estimator", mutate(r"estimator: slip_min", "estimator: kalman"),
      "estimator", "one of"),
     ("typo in a key", mutate(r"cmd_timeout: 0.5", "cmd_timout: 0.5"),
      "cmd_timout", "no such parameter"),
