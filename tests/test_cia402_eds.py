@@ -200,9 +200,14 @@ def test_node_guarding_drive_gets_guarding(rig_factory):
     rig.driver.activate()
     run_until(rig, lambda r: np.allclose([d.velocity_rev_per_s for d in rig.devices],
                                          MOTOR_REV_S, atol=1e-9), velocities=COMMAND)
+    def guard_answers():
+        return [m for m in rig.sniff() if m.arbitration_id == 0x701 and not m.is_remote_frame
+                and len(m.data) == 1 and m.data[0] & 0x7F == 0x05]
+
+    # the toggle needs two exchanges (one per 50 ms guard time): wait for them
+    run_until(rig, lambda r: len(guard_answers()) >= 2, velocities=COMMAND)
     requests = [m for m in rig.sniff() if m.arbitration_id == 0x701 and m.is_remote_frame]
-    answers = [m for m in rig.sniff() if m.arbitration_id == 0x701 and not m.is_remote_frame
-               and len(m.data) == 1 and m.data[0] & 0x7F == 0x05]
+    answers = guard_answers()
     assert requests and answers
     assert {m.data[0] & 0x80 for m in answers} == {0x00, 0x80}       # the toggle bit
 

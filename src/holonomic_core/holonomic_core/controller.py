@@ -478,12 +478,15 @@ class BaseController:
             elif sample is None:
                 # the reference is the limited, saturated twist; the monitor
                 # checks the joints against its joint rates as in velocity mode
+                # feedback from the last interval's twist: the published,
+                # windowed one lags by half its window (measured: 3x the
+                # XR4000's slip in torque mode with the 30 ms window)
                 efforts = self.torque.step(reading.positions, self.odometry.pose,
-                                           self.odometry.twist, twist * scale, self.dt)
+                                           self.odometry.rate_twist, twist * scale, self.dt)
                 self.driver.write_efforts(efforts)
             else:
                 efforts = self.torque.track(reading.positions, self.odometry.pose,
-                                            self.odometry.twist, *sample)
+                                            self.odometry.rate_twist, *sample)
                 self.driver.write_efforts(efforts)
         except DriverError as exc:
             self._on_fault(exc)

@@ -125,6 +125,10 @@ class Odometry:
         """
         self.pose = np.array(pose, dtype=float)
         self.twist = np.zeros(3)
+        #: [m/s, m/s, rad/s] the body twist over the last reading interval
+        #: alone (no window, no lag): velocity feedback for the torque
+        #: controller, where the window's delay would cost damping
+        self.rate_twist = np.zeros(3)
         # upper triangle (p00, p01, p02, p11, p12, p22) as Python floats: the
         # per-cycle update is scalar; the matrix is built when read
         self._P = (0.0,) * 6
@@ -184,6 +188,7 @@ class Odometry:
             # thresholds are speeds [m/s]. The displacement is rate x dt.
             rate_twist, residual = self.model.kinematics.estimate(mid, dq / dt, self.estimator)
             disp = rate_twist * dt
+            self.rate_twist = rate_twist
             self.residual = residual
             self.slip = (math.sqrt(float(np.dot(residual, residual)) / residual.size)
                          if residual.size else 0.0)
