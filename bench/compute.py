@@ -12,7 +12,8 @@ import time
 
 import numpy as np
 
-from holonomic_core.controller import BaseController, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
 from holonomic_core.mock_driver import MockDriver
 

@@ -47,9 +47,9 @@ def _table(title: str, specs) -> list[str]:
 
 def generate() -> str:
     from hamr_base.offset_turret import OffsetTurretKinematics
-    from holonomic_core.controller import CONTROLLER_SPECS
+    from holonomic_core.config import CONTROLLER_SPECS
     from holonomic_core.driver import driver_class
-    from holonomic_core.model import ROBOT_SPECS, joint_specs
+    from holonomic_core.config import ROBOT_SPECS, joint_specs
     from pcv_base.powered_caster import PoweredCasterKinematics
 
     stand_in = SimpleNamespace(joint_names=("JOINT",), kind="ddrot")

@@ -20,7 +20,8 @@ import time
 import can
 import numpy as np
 
-from holonomic_core.controller import BaseController, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
 from holonomic_core.loop import ControlLoop
 from holonomic_drivers import cia402_protocol as co
 from holonomic_drivers import odrive_protocol as proto

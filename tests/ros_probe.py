@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from holonomic_bringup.robot_client import RobotClient as Probe  # noqa: F401
-from holonomic_bringup.robot_client import relative_pose, wait_until  # noqa: F401
+from holonomic_bringup.robot_client import wait_until  # noqa: F401
+from holonomic_core.se2 import relative_pose  # noqa: F401
 
 
 _held_domain_locks = []

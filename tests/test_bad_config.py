@@ -5,8 +5,7 @@ import re
 
 import pytest
 
-from holonomic_core.controller import load_config
-from holonomic_core.model import resolve_config
+from holonomic_core.config import load_config, resolve_config
 from holonomic_core.schema import ConfigError
 
 HAMR = resolve_config("hamr").read_text()

@@ -18,7 +18,7 @@ import sys
 
 import pytest
 
-from holonomic_core.model import resolve_config
+from holonomic_core.config import resolve_config
 
 BRINGUP = [
     ([], "the following arguments are required: robot"),

@@ -12,7 +12,7 @@ import pytest
 from holonomic_core.calibration import (CalibrationError, calibrate, family_for,
                                         samples_from_readings)
 from holonomic_core.drift_watch import DriftWatch
-from holonomic_core.model import load_model, read_params_file
+from holonomic_core.config import load_model, read_params_file
 
 
 def _pcv_truth():
@@ -172,7 +172,7 @@ def test_drift_watch_names_the_caster_and_the_parameter():
 def test_overlay_is_a_params_file_that_changes_the_model(tmp_path):
     import yaml
     from holonomic_bringup.calibrate import overlay_document
-    from holonomic_core.controller import load_config
+    from holonomic_core.config import load_config
     overlay = {"pcv.front_left.wheel_radius": 0.0561,
                "pcv.rear_right.caster_offset": 0.021,
                "joints.front_right_steer_joint.zero_correction": 0.05}

@@ -12,7 +12,7 @@ import subprocess
 import pytest
 from rcl_interfaces.srv import GetParameters
 
-from holonomic_core.controller import load_config
+from holonomic_core.config import load_config
 from holonomic_sim.sim_driver import SimDriver
 from ros_probe import Bringup, Probe, wait_until
 
@@ -73,7 +73,7 @@ def test_a_recorded_drive_is_calibrated_and_the_overlay_loads(ros, tmp_path):
                                 "control_mode": "torque"})
     with SimDriver(cfg.model, cfg.values, cfg.controller.control_rate) as driver:
         truth = driver.hidden_truth
-    from holonomic_core.model import read_params_file
+    from holonomic_core.config import read_params_file
     estimate = read_params_file(overlay)
     for caster in ("c1", "c2", "c3"):
         key = f"joints.{caster}_steer_joint.zero_correction"

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from can_rig import CanRig
-from holonomic_core.controller import ControllerState, load_config
+from holonomic_core.config import load_config, resolve_config
+from holonomic_core.controller import ControllerState
 from holonomic_core.driver import DriverCommunicationError
-from holonomic_core.model import resolve_config
 from holonomic_core.schema import ConfigError
 
 BACKENDS = ["odrive_can", "cia402"]

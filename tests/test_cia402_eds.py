@@ -24,9 +24,8 @@ import numpy as np
 import pytest
 
 from can_rig import CanRig
-from holonomic_core.controller import load_config
+from holonomic_core.config import load_config, resolve_config
 from holonomic_core.driver import DriverFault
-from holonomic_core.model import resolve_config
 from holonomic_core.schema import ConfigError
 from holonomic_drivers import eds_check
 from holonomic_drivers.eds_check import cycle_until, wait_until

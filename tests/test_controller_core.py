@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from holonomic_core.controller import BaseController, ControllerState, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController, ControllerState
 from holonomic_core.driver import DriverCommunicationError, DriverStateError
 from holonomic_core.mock_driver import MockDriver
 from holonomic_core.schema import ConfigError

@@ -197,7 +197,7 @@ def test_sigterm_while_moving_stops_the_motors_and_exits_zero(ros, start_bringup
 
 
 def test_invalid_config_exits_with_a_message_naming_the_key(start_bringup, tmp_path):
-    from holonomic_core.model import resolve_config
+    from holonomic_core.config import resolve_config
     bad = tmp_path / "bad.yaml"
     bad.write_text(resolve_config("hamr").read_text().replace(
         "wheel_radius: 0.0615", "wheel_radius: -0.0615"))

@@ -7,7 +7,8 @@ import pytest
 
 from holonomic_core.limits import TwistLimiter, saturate_joint_rates
 from holonomic_core.model import load_model
-from holonomic_core.odometry import Odometry, OdometryNoise, compose_arc
+from holonomic_core.odometry import Odometry, OdometryNoise
+from holonomic_core.se2 import compose_arc
 
 LIMITER = TwistLimiter(max_velocity=(1.0, 0.5, 2.0), max_acceleration=(2.0, 1.0, 4.0),
                        max_deceleration=(4.0, 2.0, 8.0))

@@ -7,7 +7,7 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from holonomic_core.controller import load_config
+from holonomic_core.config import load_config
 from holonomic_core.link_transforms import LinkTree, rotate
 from holonomic_core.model import load_model
 from holonomic_sim.sim_driver import SimDriver

@@ -26,7 +26,7 @@ import can
 import cantools
 import pytest
 
-from holonomic_core.controller import load_config
+from holonomic_core.config import load_config
 from holonomic_core.driver import DriverFault
 from holonomic_core.schema import ConfigError
 from holonomic_drivers import odrive_protocol as proto

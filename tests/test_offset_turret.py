@@ -155,7 +155,7 @@ def test_invalid_geometry_is_rejected_naming_the_parameter(key, kwargs):
 @pytest.mark.parametrize("key, value", [("ddrot.wheel_radius", 100.5),       # over 100 m
                                         ("body.drive_base.mass", 0.0)])      # not > 0
 def test_geometry_out_of_range_is_refused_by_the_schema(key, value):
-    from holonomic_core.controller import load_config
+    from holonomic_core.config import load_config
     with pytest.raises(ConfigError) as err:
         load_config("hamr", {key: value})
     assert err.value.key == key
@@ -181,7 +181,7 @@ def test_zero_turret_offset_in_a_config_file_is_rejected(tmp_path):
 
 
 def load_model_path_text():
-    from holonomic_core.model import resolve_config
+    from holonomic_core.config import resolve_config
     return resolve_config("hamr").read_text()
 
 

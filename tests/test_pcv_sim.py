@@ -9,7 +9,8 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from holonomic_core.controller import BaseController, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
 from holonomic_sim.sim_driver import SimDriver
 from holonomic_sim.urdf import generate_urdf
 

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from holonomic_core.controller import load_config
+from holonomic_core.config import load_config
 from holonomic_core.limits import saturate_joint_rates
 from holonomic_core.model import load_model
 from holonomic_core.schema import ConfigError

@@ -7,7 +7,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from holonomic_core.controller import load_config
+from holonomic_core.config import load_config
 from holonomic_core.driver import DriverStateError
 from holonomic_core.schema import ConfigError
 from holonomic_sim.sim_driver import SimDriver

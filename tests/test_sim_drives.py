@@ -21,7 +21,8 @@ import time
 import numpy as np
 import pytest
 
-from holonomic_core.controller import BaseController, ControllerState, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController, ControllerState
 from holonomic_core.driver import JointReading
 from holonomic_core.schema import ConfigError
 from holonomic_sim.joint_motor import SimulatedJointMotor, SimulatedJoints

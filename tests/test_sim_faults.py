@@ -7,7 +7,8 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from holonomic_core.controller import BaseController, ControllerState, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController, ControllerState
 from holonomic_core.driver import DriverFault, JointReading
 from holonomic_sim.sim_driver import SimDriver
 

@@ -4,7 +4,8 @@ import math
 
 import numpy as np
 
-from holonomic_core.controller import BaseController, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
 from holonomic_core.mock_driver import MockDriver
 from holonomic_core.slip_monitor import SlipLimits, SlipMonitor

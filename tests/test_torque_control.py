@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from holonomic_core.controller import BaseController, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
 from holonomic_core.schema import ConfigError
 from holonomic_core.torque import OperationalSpaceController

@@ -104,7 +104,7 @@ def run(args: argparse.Namespace, out=None) -> dict:
     from holonomic_core.model import load_model
     from holonomic_analysis import holonomicity, isotropy, mobility
 
-    from holonomic_core.controller import load_config
+    from holonomic_core.config import load_config
     overrides = dict(args.param)
     # The whole configuration, so that a misspelt -p or --sweep key is named
     # (load_model alone reads only the geometry and would ignore it).

@@ -33,9 +33,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from holonomic_core.controller import BaseController, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
-from holonomic_core.odometry import wrap_angle
+from holonomic_core.se2 import wrap_angle
 
 
 @dataclass(frozen=True)

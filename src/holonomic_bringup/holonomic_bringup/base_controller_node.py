@@ -42,11 +42,11 @@ from std_msgs.msg import Header, String
 from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
 
-from holonomic_core.controller import BaseController, ControllerState, config_from_flat
+from holonomic_core.config import config_from_flat, read_params_file, resolve_config
+from holonomic_core.controller import BaseController, ControllerState
 from holonomic_core.driver import DriverError
 from holonomic_core.link_transforms import LinkTree
 from holonomic_core.loop import ControlLoop
-from holonomic_core.model import read_params_file, resolve_config
 from holonomic_core.schema import ConfigError, ParamSpec
 from holonomic_sim.urdf import generate_urdf
 from holonomic_bringup.process_guard import (STOP, InstanceConflict, InstanceLock,

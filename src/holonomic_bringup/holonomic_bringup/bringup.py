@@ -71,7 +71,7 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
     """What argparse cannot check alone; exits 2 with one line (parser.error)."""
     import yaml
 
-    from holonomic_core.model import read_params_file
+    from holonomic_core.config import read_params_file
     from holonomic_core.schema import ConfigError
 
     for item in args.param:
@@ -125,7 +125,7 @@ def start_foxglove(args: argparse.Namespace):
 
 def ros_arguments(args: argparse.Namespace) -> list[str]:
     """The ``--ros-args`` for the base controller node."""
-    from holonomic_core.model import resolve_config
+    from holonomic_core.config import resolve_config
 
     ros = ["--ros-args", "-p", f"robot_config:={resolve_config(args.robot)}"]
     if args.namespace:

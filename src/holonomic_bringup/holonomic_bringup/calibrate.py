@@ -44,7 +44,7 @@ def read_recording(path: Path, robot: str, namespace: str | None):
     true poses or None) of one robot of the recording; raises ValueError with
     a one-line reason."""
     from holonomic_bringup.recording_plot import joint_arrays, load, stamped_poses
-    from holonomic_core.model import build_model, load_model
+    from holonomic_core.config import build_model, load_model
 
     try:
         robots, series, _ = load(path)

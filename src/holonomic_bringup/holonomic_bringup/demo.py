@@ -83,9 +83,8 @@ def go_home(client, timeout: float = 12.0) -> float:
             break
         speed = min(0.5, 1.5 * dist)
         vx_w, vy_w = (-x / dist * speed, -y / dist * speed) if dist > 1e-9 else (0.0, 0.0)
-        wz = max(-1.5, min(1.5, -2.0 * math.remainder(yaw, 2 * math.pi)))
-        c, s = math.cos(yaw), math.sin(yaw)
-        client.publish(c * vx_w + s * vy_w, -s * vx_w + c * vy_w, wz)
+        wz = max(-1.5, min(1.5, -2.0 * wrap_angle(yaw)))
+        client.publish(*rotate(vx_w, vy_w, -yaw), wz)
         time.sleep(1.0 / RATE)
     client.wait_at_rest(timeout=5.0)
     return time.monotonic() - t0
@@ -218,7 +217,8 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from holonomic_bringup.robot_client import RobotClient, relative_pose
+    from holonomic_bringup.robot_client import RobotClient
+    from holonomic_core.se2 import relative_pose
 
     out = args.out
     log_path = out / f"demo_{Path(args.robot).stem}_bringup.log"
@@ -288,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
         err = error_between(final_odom, final_truth)
         final = (f"end: odometry vs ground truth {err * 100:.1f} cm after {travelled:.2f} m "
                  f"({100 * err / travelled:.2f} % of distance); heading error "
-                 f"{math.degrees(math.remainder(final_odom[2] - final_truth[2], 2 * math.pi)):+.2f} "
+                 f"{math.degrees(wrap_angle(final_odom[2] - final_truth[2])):+.2f} "
                  f"deg; true distance from start {np.linalg.norm(final_truth[:2]) * 100:.1f} cm")
         print(format_table(segs, final))
         png = out / f"demo_{Path(args.robot).stem}.png"

@@ -108,7 +108,7 @@ def run_step(driver, index: int, amplitude: float, duration: float, rate: float,
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    from holonomic_core.controller import load_config
+    from holonomic_core.config import load_config
     from holonomic_core.driver import DriverError
     from holonomic_core.schema import ConfigError, parse_overrides
     from holonomic_core.step_response import step_response

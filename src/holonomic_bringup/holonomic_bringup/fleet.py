@@ -19,9 +19,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
-from holonomic_core.controller import load_config
+from holonomic_core.config import load_config, resolve_config
 from holonomic_core.loop import ControlLoop
-from holonomic_core.model import resolve_config
 from holonomic_core.schema import ConfigError
 from holonomic_bringup.process_guard import STOP, InstanceConflict
 

@@ -383,7 +383,7 @@ class _RobotChannels:
     def _grow_path(self, which: str, pose: Planar) -> None:
         last = self._last_path_pose.get(which)
         if last is not None and math.hypot(pose[0] - last[0], pose[1] - last[1]) < PATH_STEP[0] \
-                and abs(math.remainder(pose[2] - last[2], 2 * math.pi)) < PATH_STEP[1]:
+                and abs(wrap_angle(pose[2] - last[2])) < PATH_STEP[1]:
             return
         self._last_path_pose[which] = pose
         self._paths[which].append(Pose(position=Vector3(x=pose[0], y=pose[1], z=0.0),

@@ -28,9 +28,9 @@ import numpy as np
 
 from holonomic_bringup.recording_plot import odom_arrays, load
 from holonomic_core.command_line import ArgumentParser
-from holonomic_core.controller import config_from_flat
-from holonomic_core.odometry import wrap_angle
+from holonomic_core.config import config_from_flat
 from holonomic_core.schema import ConfigError
+from holonomic_core.se2 import wrap_angle
 
 
 def recording_from_mcap(path: Path, namespace: str = "", reference_topic: str = "ground_truth/odom"):

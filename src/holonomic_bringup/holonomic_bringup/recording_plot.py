@@ -95,7 +95,7 @@ def stamped_poses(samples) -> dict[float, np.ndarray]:
 def slip_residuals(flat: dict, samples) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Per-unit slip residuals [m/s] from joint_states samples, with the model
     of ``flat``; empty for a base without redundancy (the DDROT)."""
-    from holonomic_core.model import build_model
+    from holonomic_core.config import build_model
     model = build_model(flat)[0]
     kin = model.kinematics
     names = list(getattr(kin, "caster_names", ()))
@@ -129,8 +129,7 @@ def plot_robot(ns: str, flat: dict, series: dict, out: Path, stem: str) -> tuple
             t_g, pose_g, tw_g = odom_arrays(truth)
             ax.plot(pose_g[:, 0], pose_g[:, 1], "k-", lw=2, alpha=0.7, label="ground truth")
             summary["final_position_error_m"] = float(np.hypot(*(pose_o[-1, :2] - pose_g[-1, :2])))
-            summary["final_heading_error_rad"] = abs(math.remainder(pose_o[-1, 2] - pose_g[-1, 2],
-                                                                    2 * math.pi))
+            summary["final_heading_error_rad"] = abs(wrap_angle(pose_o[-1, 2] - pose_g[-1, 2]))
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("x [m] (odom)")
         ax.set_ylabel("y [m] (odom)")

@@ -19,6 +19,8 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from std_srvs.srv import SetBool, Trigger
 
+from holonomic_core.se2 import yaw_of_quaternion
+
 
 def wait_until(predicate, timeout: float, what: str, period: float = 0.02):
     """Poll ``predicate`` until truthy and return it; TimeoutError after ``timeout`` s."""
@@ -32,16 +34,8 @@ def wait_until(predicate, timeout: float, what: str, period: float = 0.02):
 
 
 def yaw_of(q) -> float:
-    """Yaw [rad] of a planar quaternion message."""
-    return 2.0 * math.atan2(q.z, q.w)
-
-
-def relative_pose(start: np.ndarray, end: np.ndarray) -> np.ndarray:
-    """Planar pose ``end`` (x, y, yaw) expressed in the frame of ``start``."""
-    dx, dy = end[0] - start[0], end[1] - start[1]
-    c, s = math.cos(start[2]), math.sin(start[2])
-    return np.array([c * dx + s * dy, -s * dx + c * dy,
-                     math.remainder(end[2] - start[2], 2 * math.pi)])
+    """Yaw [rad] of a quaternion message (geometry_msgs/Quaternion)."""
+    return yaw_of_quaternion((q.x, q.y, q.z, q.w))
 
 
 @dataclass(frozen=True)

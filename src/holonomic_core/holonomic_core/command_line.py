@@ -102,7 +102,7 @@ def output_file(text: str) -> str:
 def robot_config(text: str) -> str:
     """An argparse ``type``: a robot config name or YAML path whose whole
     configuration is valid (the config's own one-line error otherwise)."""
-    from holonomic_core.controller import load_config
+    from holonomic_core.config import load_config
     from holonomic_core.schema import ConfigError
 
     try:

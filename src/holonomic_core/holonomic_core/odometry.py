@@ -35,30 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-def wrap_angle(angle: float) -> float:
-    """Angle wrapped to [-pi, pi] [rad]."""
-    return math.remainder(angle, 2.0 * math.pi)
-
-
-def compose_arc(pose, dx: float, dy: float, dtheta: float) -> tuple[float, float]:
-    """World-frame displacement of a constant-twist arc.
-
-    The body moves by ``(dx, dy, dtheta)`` integrated as a constant body
-    twist (the body-frame chord of an arc), starting at heading ``pose[2]``.
-    Returns the world (odom-frame) displacement of the origin.
-    """
-    if abs(dtheta) < 1e-6:
-        # series of sin(t)/t and (1 - cos t)/t to 2nd order
-        a = 1.0 - dtheta * dtheta / 6.0
-        b = 0.5 * dtheta
-    else:
-        a = math.sin(dtheta) / dtheta
-        b = (1.0 - math.cos(dtheta)) / dtheta
-    bx = a * dx - b * dy
-    by = b * dx + a * dy
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    return c * bx - s * by, s * bx + c * by
+from holonomic_core.se2 import integrate_arc
 
 
 @dataclass(frozen=True)
@@ -240,8 +217,7 @@ class Odometry:
         """Compose the displacement; grow the covariance (slip2_dt: rho^2 dt [m^2/s])."""
         dx, dy, dth = disp.tolist()
         x, y, heading = self.pose.tolist()
-        wx, wy = compose_arc((x, y, heading), dx, dy, dth)
-        self.pose[:] = (x + wx, y + wy, wrap_angle(heading + dth))
+        self.pose[:] = integrate_arc((x, y, heading), dx, dy, dth)
         # Covariance: P' = F P F^T + G Q G^T, F = d(pose')/d(pose), G maps
         # body-frame increment noise to the odom frame.
         dist = math.hypot(dx, dy)

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from holonomic_core.odometry import compose_arc, wrap_angle
+from holonomic_core.se2 import compose, integrate_arc, relative_pose, rotate
 from holonomic_core.schema import ConfigError
 
 #: kinematics kind -> "module:Class" of its dynamic model (lazily imported)
@@ -79,15 +79,11 @@ class OperationalSpaceController:
     def errors(self, pose, twist) -> tuple[np.ndarray, np.ndarray]:
         """(pose error, twist error) of the base against the reference, in
         base_link [m, m, rad] and [m/s, m/s, rad/s]."""
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        dx, dy = pose[0] - self.ref_pose[0], pose[1] - self.ref_pose[1]
-        e_pose = np.array([c * dx + s * dy, -s * dx + c * dy,
-                           wrap_angle(pose[2] - self.ref_pose[2])])
+        # the base's offset from the reference, along the base's own axes
+        e_pose = -relative_pose(pose, self.ref_pose)
         # the reference twist, turned into the actual base frame
-        d = self.ref_pose[2] - pose[2]
-        cd, sd = math.cos(d), math.sin(d)
-        ref = np.array([cd * self.ref_twist[0] - sd * self.ref_twist[1],
-                        sd * self.ref_twist[0] + cd * self.ref_twist[1], self.ref_twist[2]])
+        rx, ry = rotate(self.ref_twist[0], self.ref_twist[1], self.ref_pose[2] - pose[2])
+        ref = np.array([rx, ry, self.ref_twist[2]])
         return e_pose, np.asarray(twist, float) - ref
 
     def step(self, positions, pose, twist, reference_twist, dt: float,
@@ -106,9 +102,8 @@ class OperationalSpaceController:
             accel = np.asarray(reference_acceleration, float)
         # advance the reference pose by the reference twist over the cycle
         mid = 0.5 * (ref_twist + self.ref_twist)
-        wx, wy = compose_arc(self.ref_pose, mid[0] * dt, mid[1] * dt, mid[2] * dt)
-        self.ref_pose = np.array([self.ref_pose[0] + wx, self.ref_pose[1] + wy,
-                                  wrap_angle(self.ref_pose[2] + mid[2] * dt)])
+        self.ref_pose = np.array(integrate_arc(self.ref_pose, mid[0] * dt, mid[1] * dt,
+                                               mid[2] * dt))
         self.ref_twist = ref_twist
         return self._torques(positions, pose, twist, accel)
 
@@ -148,7 +143,4 @@ class OperationalSpaceController:
             return
         clipped = np.clip(e_pose, -np.array(MAX_ERROR), MAX_ERROR)
         # ref = pose - R(theta) e (position), theta - e_theta (heading)
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        self.ref_pose = np.array([pose[0] - (c * clipped[0] - s * clipped[1]),
-                                  pose[1] - (s * clipped[0] + c * clipped[1]),
-                                  wrap_angle(pose[2] - clipped[2])])
+        self.ref_pose = compose(pose, -clipped)

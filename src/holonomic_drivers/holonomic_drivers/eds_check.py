@@ -27,7 +27,7 @@ import time
 import numpy as np
 import yaml
 
-from holonomic_core.controller import load_config
+from holonomic_core.config import load_config
 from holonomic_core.driver import DriverError, DriverFault
 from holonomic_core.schema import ConfigError
 from holonomic_drivers.emulated_cia402 import EmulatedCia402Drive

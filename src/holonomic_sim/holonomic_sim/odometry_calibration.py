@@ -33,7 +33,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from holonomic_core.odometry import Odometry, OdometryNoise, wrap_angle
+from holonomic_core.odometry import Odometry, OdometryNoise
+from holonomic_core.se2 import wrap_angle
 
 #: pose coefficients (OdometryNoise fields), heading-only ones first
 HEADING_KEYS = ("angular_variance_per_radian", "angular_variance_per_meter",

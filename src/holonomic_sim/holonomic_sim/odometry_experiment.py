@@ -44,10 +44,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from holonomic_core.controller import BaseController, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
 from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.loop import ManualClock
-from holonomic_core.odometry import Odometry, wrap_angle
+from holonomic_core.odometry import Odometry
+from holonomic_core.se2 import wrap_angle
 from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
                                          robot_config)
 from holonomic_core.schema import ConfigError, parse_overrides

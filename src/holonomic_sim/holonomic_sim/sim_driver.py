@@ -210,7 +210,7 @@ class SimDriver(Driver):
         self.hidden_truth = dict(changed)
         if not changed:
             return self.model
-        from holonomic_core.model import build_model
+        from holonomic_core.config import build_model
 
         flat.update(changed)
         return build_model(flat)[0]

@@ -33,10 +33,11 @@ import numpy as np
 
 from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
                                          robot_config)
-from holonomic_core.controller import BaseController, load_config
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
-from holonomic_core.odometry import wrap_angle
 from holonomic_core.schema import parse_overrides
+from holonomic_core.se2 import wrap_angle
 from holonomic_sim.contact_forces import internal_force
 
 

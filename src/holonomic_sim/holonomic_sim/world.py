@@ -17,6 +17,7 @@ import numpy as np
 import pybullet as pb
 
 from holonomic_core.link_transforms import rotate
+from holonomic_core.se2 import relative_pose, yaw_of_quaternion
 from holonomic_sim.urdf import frictionless_links, generate_urdf
 
 
@@ -26,15 +27,6 @@ _LIFT = 0.1
 
 class SimError(RuntimeError):
     """The physics server could not be started or a robot not loaded."""
-
-
-def _yaw_of(quaternion) -> float:
-    x, y, z, w = quaternion
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def _wrap(angle: float) -> float:
-    return math.remainder(angle, 2.0 * math.pi)
 
 
 @dataclass(frozen=True)
@@ -47,9 +39,7 @@ class Pose2D:
 
     def inverse_compose(self, x: float, y: float, yaw: float) -> np.ndarray:
         """``self^-1 * (x, y, yaw)``: a world pose expressed in this pose's frame."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        dx, dy = x - self.x, y - self.y
-        return np.array([c * dx + s * dy, -s * dx + c * dy, _wrap(yaw - self.yaw)])
+        return relative_pose((self.x, self.y, self.yaw), (x, y, yaw))
 
 
 class SimRobot:
@@ -281,7 +271,7 @@ class SimRobot:
         position, orientation = pb.getBasePositionAndOrientation(
             self.body, physicsClientId=self.world.client)
         offset = self._com_offset(orientation)
-        return position[0] - offset[0], position[1] - offset[1], _yaw_of(orientation)
+        return position[0] - offset[0], position[1] - offset[1], yaw_of_quaternion(orientation)
 
     def pose(self) -> np.ndarray:
         """base_link's planar pose relative to its start pose (the odom frame)."""
@@ -296,7 +286,7 @@ class SimRobot:
         r = self._com_offset(orientation)
         linear = (com_linear[0] - (angular[1] * r[2] - angular[2] * r[1]),
                   com_linear[1] - (angular[2] * r[0] - angular[0] * r[2]))
-        yaw = _yaw_of(orientation)
+        yaw = yaw_of_quaternion(orientation)
         c, s = math.cos(yaw), math.sin(yaw)
         return np.array([c * linear[0] + s * linear[1], -s * linear[0] + c * linear[1],
                          angular[2]])
