@@ -46,19 +46,21 @@ def _table(title: str, specs) -> list[str]:
 
 
 def generate() -> str:
+    from hamr_base.description import OffsetTurretDescription
     from hamr_base.offset_turret import OffsetTurretKinematics
-    from holonomic_core.config import CONTROLLER_SPECS
+    from holonomic_core.config import CONTROLLER_SPECS, ROBOT_SPECS, joint_specs
     from holonomic_core.driver import driver_class
-    from holonomic_core.config import ROBOT_SPECS, joint_specs
+    from pcv_base.description import PoweredCasterDescription
     from pcv_base.powered_caster import PoweredCasterKinematics
 
     stand_in = SimpleNamespace(joint_names=("JOINT",), kind="ddrot")
     lines = [BEGIN, ""]
     lines += _table("Robot", ROBOT_SPECS)
     lines += _table("DDROT geometry and body (`robot.kinematics: ddrot`)",
-                    OffsetTurretKinematics.param_specs({}))
+                    OffsetTurretKinematics.param_specs({}) + OffsetTurretDescription.param_specs({}))
     lines += _table("PCV geometry and body (`robot.kinematics: pcv`; NAME = each caster)",
-                    PoweredCasterKinematics.param_specs({"pcv.casters": ["NAME"]}))
+                    PoweredCasterKinematics.param_specs({"pcv.casters": ["NAME"]})
+                    + PoweredCasterDescription.param_specs({}))
     lines += _table("Joints (JOINT = each joint of the robot)", joint_specs("JOINT"))
     lines += _table("Base controller", CONTROLLER_SPECS)
     for name in ("sim", "mock", "odrive_can", "cia402"):

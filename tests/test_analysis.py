@@ -278,8 +278,8 @@ def test_isotropy_along_the_demo_script_follows_the_casters():
 
 
 def _script():
-    from holonomic_bringup.demo import SCRIPT
-    return SCRIPT
+    from holonomic_core.teleop_script import demo_script
+    return demo_script()
 
 
 # -- measured holonomicity ------------------------------------------------------------------

@@ -11,8 +11,8 @@ import pytest
 
 from holonomic_core.calibration import (CalibrationError, calibrate, family_for,
                                         samples_from_readings)
-from holonomic_core.drift_watch import DriftWatch
 from holonomic_core.config import load_model, read_params_file
+from holonomic_core.drift_watch import DriftWatch
 
 
 def _pcv_truth():

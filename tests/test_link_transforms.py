@@ -8,10 +8,10 @@ import pybullet as pb
 import pytest
 
 from holonomic_core.config import load_config
+from holonomic_core.description import base_height, generate_urdf
 from holonomic_core.link_transforms import LinkTree, rotate
 from holonomic_core.model import load_model
 from holonomic_sim.sim_driver import SimDriver
-from holonomic_sim.urdf import base_height, generate_urdf
 
 
 def yaw_of(q):

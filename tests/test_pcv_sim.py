@@ -11,8 +11,8 @@ import pytest
 
 from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
+from holonomic_core.description import generate_urdf
 from holonomic_sim.sim_driver import SimDriver
-from holonomic_sim.urdf import generate_urdf
 
 
 class SimClock:

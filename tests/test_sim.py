@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from holonomic_core.config import load_config
+from holonomic_core.description import generate_urdf
 from holonomic_core.driver import DriverStateError
 from holonomic_core.schema import ConfigError
 from holonomic_sim.sim_driver import SimDriver
-from holonomic_sim.urdf import generate_urdf
 
 
 def make_driver(overrides=None, control_rate=200.0):

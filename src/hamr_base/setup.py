@@ -16,4 +16,10 @@ setup(
     maintainer_email="dev@holonomic.invalid",
     description="DDROT (offset-turret differential drive) kinematics",
     license="Apache-2.0",
+    entry_points={
+        # the family "ddrot" for holonomic_core (holonomic_core/plugins.py)
+        "holonomic.kinematics": ["ddrot = hamr_base.offset_turret:OffsetTurretKinematics"],
+        "holonomic.description": ["ddrot = hamr_base.description:OffsetTurretDescription"],
+        "holonomic.calibration": ["ddrot = hamr_base.calibration:TurretCalibration"],
+    },
 )

@@ -13,6 +13,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*"]),
+    # the demo's scripted teleop (holonomic_core/teleop_script.py)
+    package_data={PACKAGE: ["demo_script.yaml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
@@ -24,4 +26,8 @@ setup(
     maintainer_email="dev@holonomic.invalid",
     description="ROS-free core: robot model, kinematics protocol, odometry, limits, driver interface",
     license="Apache-2.0",
+    entry_points={
+        # the core's own backend, registered like every other (holonomic_core/plugins.py)
+        "holonomic.drivers": ["mock = holonomic_core.mock_driver:MockDriver"],
+    },
 )

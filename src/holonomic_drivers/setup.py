@@ -17,4 +17,11 @@ setup(
     description="Motor drive backends over CAN (ODrive CANSimple, CANopen CiA 402) and "
                 "their emulators",
     license="Apache-2.0",
+    entry_points={
+        # plugins of holonomic_core (holonomic_core/plugins.py)
+        "holonomic.drivers": [
+            "odrive_can = holonomic_drivers.odrive_can:OdriveCanDriver",
+            "cia402 = holonomic_drivers.cia402:Cia402Driver",
+        ],
+    },
 )

@@ -22,5 +22,8 @@ setup(
             "holonomic-torque-experiment = holonomic_sim.torque_experiment:main",
             "holonomic-calibration-experiment = holonomic_sim.calibration_experiment:main",
         ],
+        # plugins of holonomic_core (holonomic_core/plugins.py)
+        "holonomic.drivers": ["sim = holonomic_sim.sim_driver:SimDriver"],
+        "holonomic.driver_adapters": ["sim_drives = holonomic_sim.sim_drives:sim_drives_driver"],
     },
 )

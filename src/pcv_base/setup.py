@@ -16,4 +16,11 @@ setup(
     maintainer_email="dev@holonomic.invalid",
     description="Powered-caster vehicle kinematics and slip-minimising odometry",
     license="Apache-2.0",
+    entry_points={
+        # the family "pcv" for holonomic_core (holonomic_core/plugins.py)
+        "holonomic.kinematics": ["pcv = pcv_base.powered_caster:PoweredCasterKinematics"],
+        "holonomic.description": ["pcv = pcv_base.description:PoweredCasterDescription"],
+        "holonomic.dynamics": ["pcv = pcv_base.dynamics:PcvDynamics"],
+        "holonomic.calibration": ["pcv = pcv_base.calibration:CasterCalibration"],
+    },
 )

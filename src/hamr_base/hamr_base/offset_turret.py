@@ -168,22 +168,6 @@ class OffsetTurretKinematics(BaseKinematics):
             ParamSpec("ddrot.turret_offset", "double",
                       "Distance b [m] from the axle midpoint forward to the turret axis; "
                       "must be > 0 for holonomic motion.", minimum=0.0, maximum=100.0),
-            # Physical body, read by the simulator's URDF generator (and by
-            # dynamics): masses [kg], lengths [m]. Inertias follow from the
-            # solid shapes.
-            _positive("body.drive_base.mass", "Mass of the drive base [kg].", 14.0, 1e4),
-            _positive("body.drive_base.length",
-                      "Length of the drive base box along its forward axis [m].", 0.40),
-            _positive("body.drive_base.width", "Width of the drive base box [m].", 0.26),
-            _positive("body.drive_base.height", "Height of the drive base box [m].", 0.06),
-            _positive("body.turret.mass", "Mass of the turret with its payload [kg].", 8.0, 1e4),
-            _positive("body.turret.radius", "Radius of the turret disc [m].", 0.30),
-            _positive("body.turret.height", "Thickness of the turret disc [m].", 0.04),
-            _positive("body.wheel.mass", "Mass of one drive wheel [kg].", 0.6, 1e3),
-            _positive("body.wheel.width", "Width of a drive wheel [m].", 0.03),
-            _positive("body.support.radius",
-                      "Radius of the frictionless support balls at the front and back of "
-                      "the drive base (the passive casters) [m].", 0.02),
         ]
 
     @classmethod
@@ -191,10 +175,4 @@ class OffsetTurretKinematics(BaseKinematics):
         kin = cls(values["ddrot.wheel_radius"], values["ddrot.half_wheel_separation"],
                   values["ddrot.turret_offset"], values["ddrot.left_wheel_radius"],
                   values["ddrot.right_wheel_radius"])
-        if values["body.wheel.width"] >= 2 * kin.a:
-            raise ConfigError("body.wheel.width", values["body.wheel.width"],
-                              f"< 2 a = {2 * kin.a:g} m (the wheels would overlap)")
-        if values["body.support.radius"] >= min(kin.r_left, kin.r_right):
-            raise ConfigError("body.support.radius", values["body.support.radius"],
-                              f"< wheel radius {kin.r:g} m")
         return kin

@@ -197,8 +197,9 @@ def run(args: argparse.Namespace, out=None) -> dict:
         if not sets:
             report.append("  none: no steering configuration of this geometry is isotropic")
     if args.trajectory:
-        from holonomic_bringup.demo import SCRIPT
-        times, samples, starts = holonomicity.rollout(args.robot, SCRIPT, overrides=overrides)
+        from holonomic_core.teleop_script import demo_script
+        times, samples, starts = holonomicity.rollout(args.robot, demo_script(),
+                                                      overrides=overrides)
         index = np.array([isotropy.isotropy(kin, q[0::2]).index for q in samples])
         worst = int(np.argmin(index))
         result["trajectory_isotropy"] = {"min": float(index.min()), "mean": float(index.mean()),

@@ -37,6 +37,7 @@ from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
 from holonomic_core.se2 import wrap_angle
+from holonomic_core.teleop_script import body_command
 
 
 @dataclass(frozen=True)
@@ -199,17 +200,16 @@ def kinematic_overrides() -> dict:
     return out
 
 
-def rollout(robot, segments, sample_rate: float = 20.0,
+def rollout(robot, script, sample_rate: float = 20.0,
             overrides: Mapping[str, object] | None = None):
-    """Drive the ``mock`` plant through scripted teleop ``segments`` (the
-    demo's :class:`~holonomic_bringup.demo.Segment` list) with the real
+    """Drive the ``mock`` plant through the scripted teleop ``script`` (a
+    :class:`~holonomic_core.teleop_script.Script`, e.g. the demo's) with the real
     controller and the configured limits, from the start configuration (all
     joints at 0).
 
     Returns ``(times [s], positions (k x n) [rad], starts)``: joint positions
     sampled at ``sample_rate`` and ``(start time, name)`` of each segment.
     """
-    from holonomic_bringup.demo import body_command
     cfg = load_config(robot, {**(overrides or {}), "driver": "mock", "cmd_timeout": 0.0,
                               "enable_on_start": True})
     clock = ManualClock()
@@ -221,10 +221,10 @@ def rollout(robot, segments, sample_rate: float = 20.0,
         ctrl = BaseController(cfg, drv, clock=clock)
         ctrl.request_enable(True)
         cycle = 0
-        for seg in segments:
+        for seg in script.segments:
             starts.append((clock.now, seg.name))
             for _ in range(round(seg.seconds / dt)):
-                ctrl.set_command(body_command(seg, ctrl.odometry.pose[2]))
+                ctrl.set_command(body_command(seg, ctrl.odometry.pose[2], script.rate))
                 clock.now += dt
                 ctrl.step()
                 if ctrl.fault is not None:

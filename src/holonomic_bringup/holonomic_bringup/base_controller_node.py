@@ -44,11 +44,11 @@ from tf2_msgs.msg import TFMessage
 
 from holonomic_core.config import config_from_flat, read_params_file, resolve_config
 from holonomic_core.controller import BaseController, ControllerState
+from holonomic_core.description import generate_urdf
 from holonomic_core.driver import DriverError
 from holonomic_core.link_transforms import LinkTree
 from holonomic_core.loop import ControlLoop
 from holonomic_core.schema import ConfigError, ParamSpec
-from holonomic_sim.urdf import generate_urdf
 from holonomic_bringup.process_guard import (STOP, InstanceConflict, InstanceLock,
                                              install_signal_handlers)
 

@@ -20,7 +20,7 @@ from holonomic_core.command_line import ArgumentParser, ShowDefaults
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    from holonomic_core.driver import DRIVER_REGISTRY
+    from holonomic_core.driver import driver_names
 
     parser = ArgumentParser(
         prog="holonomic-bringup", formatter_class=ShowDefaults,
@@ -28,7 +28,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                     "and its topics for one robot. Motors start disarmed unless --enable.")
     parser.add_argument("robot", help="a config name from config/ (hamr, xr4000, comr3) "
                                       "or a path to a robot YAML")
-    parser.add_argument("--driver", choices=sorted(DRIVER_REGISTRY),
+    parser.add_argument("--driver", choices=driver_names(),
                         help="driver backend (default: the config's `driver`, normally sim)")
     parser.add_argument("--sim-drives", action="store_true",
                         help="with --driver odrive_can or cia402: run that CAN driver against "

@@ -17,48 +17,19 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from holonomic_bringup.process_guard import STOP, install_signal_handlers
 from holonomic_core.command_line import ArgumentParser, ShowDefaults, robot_config
+from holonomic_core.se2 import rotate, wrap_angle
+from holonomic_core.teleop_script import Segment, body_command, demo_script
 
 
-@dataclass(frozen=True)
-class Segment:
-    """A scripted motion. ``twist`` (vx, vy, wz); in ``frame`` base_link
-    (a body twist) or odom (vx, vy in the odom frame, turned into a body
-    twist every cycle with the odometry heading)."""
-
-    name: str
-    twist: tuple[float, float, float]
-    seconds: float
-    frame: str = "base_link"
-
-
-SCRIPT = (
-    Segment("forward", (0.5, 0.0, 0.0), 3.0),
-    Segment("strafe left (constant heading)", (0.0, 0.4, 0.0), 3.0),
-    Segment("diagonal", (0.35, -0.35, 0.0), 3.0),
-    Segment("spin in place", (0.0, 0.0, 1.5), 3.0),
-    Segment("translate while rotating", (0.3, 0.2, 0.6), 4.0),
-    Segment("line in odom while spinning", (-0.3, 0.2, 1.0), 4.0, frame="odom"),
-)
-RATE = 50.0          # [Hz] teleop publish rate
+SCRIPT = demo_script()
+RATE = SCRIPT.rate   # [Hz] teleop publish rate
 STEADY = 0.5         # fraction of a segment (its end) averaged as "achieved"
-
-
-def body_command(seg: Segment, yaw: float) -> tuple[float, float, float]:
-    """The body twist to publish now; ``yaw`` [rad]: the odometry heading."""
-    vx, vy, wz = seg.twist
-    if seg.frame == "odom":
-        # The command holds until the next one: aim at the mid-period heading.
-        yaw += 0.5 * wz / RATE
-        c, s = math.cos(yaw), math.sin(yaw)
-        return (c * vx + s * vy, -s * vx + c * vy, wz)
-    return seg.twist
 
 
 def achieved(samples, frame: str) -> np.ndarray:
@@ -67,8 +38,7 @@ def achieved(samples, frame: str) -> np.ndarray:
     for s in samples:
         vx, vy, wz = s.twist
         if frame == "odom":
-            c, si = math.cos(s.pose[2]), math.sin(s.pose[2])
-            vx, vy = c * vx - si * vy, si * vx + c * vy
+            vx, vy = rotate(vx, vy, s.pose[2])
         rows.append((vx, vy, wz))
     return np.mean(rows, axis=0) if rows else np.full(3, np.nan)
 
@@ -258,13 +228,13 @@ def main(argv: list[str] | None = None) -> int:
         segs = []
         # (segment, start pose in odom, start and end time [s, monotonic])
         marks = []
-        for seg in SCRIPT:
+        for seg in SCRIPT.segments:
             client.wait_at_rest()
             o0, g0 = client.latest_odom().pose, client.latest_truth().pose
             t0 = time.monotonic()
             while time.monotonic() - t0 < seg.seconds:
                 _check(robot, log_path)
-                client.publish(*body_command(seg, client.latest_odom().pose[2]))
+                client.publish(*body_command(seg, client.latest_odom().pose[2], RATE))
                 time.sleep(1.0 / RATE)
             ach = achieved(client.truth_since(t0 + (1 - STEADY) * seg.seconds), seg.frame)
             client.wait_at_rest()

@@ -42,7 +42,7 @@ def _error(message: str) -> int:
 
 
 def parse_args(argv):
-    from holonomic_core.driver import DRIVER_REGISTRY
+    from holonomic_core.driver import driver_names
 
     parser = ArgumentParser(
         prog="holonomic-drive-test",
@@ -50,7 +50,7 @@ def parse_args(argv):
                     "overshoot, settling time and steady-state error.")
     parser.add_argument("robot", help="a config name from config/ or a robot YAML")
     parser.add_argument("--joint", required=True, help="the joint to step (a joint name)")
-    parser.add_argument("--driver", choices=sorted(DRIVER_REGISTRY),
+    parser.add_argument("--driver", choices=driver_names(),
                         help="driver backend (default: the config's, normally sim)")
     parser.add_argument("--amplitude", type=float, metavar="RAD_S",
                         help="step size [rad/s] (default: a quarter of the joint's max_velocity)")

@@ -55,6 +55,7 @@ from foxglove.messages import (FrameTransform, FrameTransforms, Pose, PosesInFra
 from foxglove.websocket import Capability
 
 from holonomic_core.link_transforms import LinkTree, axis_angle
+from holonomic_core.se2 import wrap_angle
 
 #: the Foxglove app's default port
 DEFAULT_PORT = 8765

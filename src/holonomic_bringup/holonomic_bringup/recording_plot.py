@@ -11,7 +11,6 @@ messages per topic, final odometry error against ground truth.
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 from collections import defaultdict
@@ -21,10 +20,11 @@ import numpy as np
 import yaml
 
 from holonomic_core.command_line import ArgumentParser, ShowDefaults
+from holonomic_core.se2 import wrap_angle, yaw_of_quaternion
 
 
 def _yaw(q) -> float:
-    return 2.0 * math.atan2(q.z, q.w)
+    return yaw_of_quaternion((q.x, q.y, q.z, q.w))
 
 
 def load(path: Path) -> tuple[dict, dict[str, list], dict[str, str]]:

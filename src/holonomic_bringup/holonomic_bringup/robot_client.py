@@ -8,7 +8,6 @@ node to an executor spinning in another thread.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from dataclasses import dataclass

@@ -25,24 +25,20 @@ parameter sets. Standard errors come
 from sigma^2 (J^T J)^-1 with sigma^2 the residual variance; consecutive
 samples' slip is correlated, so they are lower bounds.
 
-Family-specific residuals live with each family (``pcv_base.calibration``,
-``hamr_base.calibration``); this module holds what they share.
+Family-specific residuals live with each family (its ``holonomic.calibration``
+entry point, :mod:`holonomic_core.plugins`); this module holds what they share.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 from dataclasses import dataclass, field
 from typing import Mapping, Protocol, Sequence
 
 import numpy as np
 
-#: kinematics kind -> "module:Class" of its calibration model (lazy imports)
-CALIBRATION_MODELS = {
-    "pcv": "pcv_base.calibration:CasterCalibration",
-    "ddrot": "hamr_base.calibration:TurretCalibration",
-}
+from holonomic_core import plugins
+from holonomic_core.se2 import relative_poses, wrap_angles
 
 #: weight of the gauge row that holds the mean radius when there is no reference
 _GAUGE_WEIGHT = 1e3
@@ -98,16 +94,12 @@ def samples_from_readings(stamps: Sequence[float], positions: np.ndarray,
     q0 = q[idx[:-1]]
     # wrapped: a steering reading may jump by 2 pi; no joint turns half a
     # revolution in one interval of a fraction of a second
-    disp = np.remainder(q[idx[1:]] - q0 + math.pi, 2 * math.pi) - math.pi
+    disp = wrap_angles(q[idx[1:]] - q0)
     moving = np.abs(disp).max(axis=1) > 1e-6
     ref = None
     if truth is not None:
         pose = np.asarray(truth, float)[idx]
-        d = pose[1:] - pose[:-1]
-        c, s = np.cos(pose[:-1, 2]), np.sin(pose[:-1, 2])
-        dth = np.remainder(d[:, 2] + math.pi, 2 * math.pi) - math.pi
-        ref = np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], dth))
-        ref = ref[moving]
+        ref = relative_poses(pose[:-1], pose[1:])[moving]
     return Samples((q0 + 0.5 * disp)[moving], disp[moving],
                    np.diff(stamps[idx])[moving], ref)
 
@@ -125,7 +117,7 @@ def chord(body: np.ndarray) -> np.ndarray:
 
 
 class FamilyCalibration(Protocol):
-    """What a family provides to the solver (see pcv_base.calibration)."""
+    """What a family provides to the solver (its holonomic.calibration entry point)."""
 
     #: flat config keys of the parameters, in theta order
     keys: tuple[str, ...]
@@ -152,12 +144,11 @@ class FamilyCalibration(Protocol):
 
 
 def family_for(model) -> FamilyCalibration:
-    """The calibration model of ``model``'s kinematic family."""
-    target = CALIBRATION_MODELS.get(model.kind)
-    if target is None:
+    """The calibration model of ``model``'s kinematic family (its
+    ``holonomic.calibration`` entry point)."""
+    if not plugins.provides("calibration", model.kind):
         raise CalibrationError(f"no calibration for kinematics '{model.kind}'")
-    module, _, name = target.partition(":")
-    return getattr(importlib.import_module(module), name)(model)
+    return plugins.load("calibration", model.kind, "robot.kinematics")(model)
 
 
 @dataclass

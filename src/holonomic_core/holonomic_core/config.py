@@ -30,8 +30,10 @@ from typing import Any, Mapping
 
 import yaml
 
+from holonomic_core import plugins
+from holonomic_core.description import Description, description_class
 from holonomic_core.drift_watch import DRIFT_SPECS
-from holonomic_core.driver import DRIVER_REGISTRY, driver_class, sim_drives_driver
+from holonomic_core.driver import driver_class, driver_names, sim_drives_driver
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics, kinematics_class
 from holonomic_core.model import JointLimits, RobotModel
 from holonomic_core.monitor import MonitorLimits
@@ -47,8 +49,9 @@ NODE_NAME = "base_controller"
 ROBOT_SPECS = [
     ParamSpec("robot.name", "string", "Robot name, used in diagnostics and logs."),
     ParamSpec("robot.kinematics", "string",
-              "Kinematic family: 'ddrot' (differential drive with offset turret) "
-              "or 'pcv' (powered-caster vehicle).", choices=("ddrot", "pcv")),
+              "Kinematic family, an installed holonomic.kinematics entry point: "
+              + ", ".join(plugins.names("kinematics")) + ".",
+              choices=plugins.names("kinematics")),
 ]
 
 
@@ -98,8 +101,9 @@ def _limit_specs() -> list[ParamSpec]:
 
 
 CONTROLLER_SPECS: list[ParamSpec] = [
-    ParamSpec("driver", "string", "Driver backend: " + ", ".join(sorted(DRIVER_REGISTRY)) + ".",
-              default="sim", choices=tuple(sorted(DRIVER_REGISTRY))),
+    ParamSpec("driver", "string",
+              "Driver backend, an installed holonomic.drivers entry point: "
+              + ", ".join(driver_names()) + ".", default="sim", choices=driver_names()),
     ParamSpec("sim_drives", "bool",
               "Run the CAN backend (odrive_can, cia402) against emulated drives whose motors "
               "are the simulator's joints (holonomic-bringup --sim-drives).", default=False),
@@ -303,7 +307,7 @@ def config_from_flat(flat: Mapping[str, Any], source: str = "") -> RobotConfig:
     values.update(validate(dspecs, flat))
     # Keys of the backends not in use (e.g. `sim.*` on a real robot) are
     # allowed in the file; anything else unknown is a typo.
-    others = tuple(f"{name}." for name in DRIVER_REGISTRY if name != controller.driver)
+    others = tuple(f"{name}." for name in driver_names() if name != controller.driver)
     specs = tuple(model_specs + CONTROLLER_SPECS + dspecs)
     check_no_unknown(list(specs), flat, ignore_prefixes=others)
     return RobotConfig(model, controller, dcls, specs, values, source)
@@ -386,14 +390,20 @@ def read_params_file(path: Path, node_name: str = NODE_NAME) -> dict[str, Any]:
     return flat
 
 
-def model_specs(flat: Mapping[str, Any]) -> tuple[list[ParamSpec], type[BaseKinematics]]:
-    """Schema of the model keys for the family that ``flat`` names."""
+def model_specs(flat: Mapping[str, Any]) -> tuple[list[ParamSpec], type[BaseKinematics],
+                                                  type[Description] | None]:
+    """Schema of the model keys for the family that ``flat`` names: its
+    kinematics' and its body's (:mod:`holonomic_core.description`); the
+    kinematics class and the description class (None: the family has none)."""
     if "robot.kinematics" not in flat:
         raise ConfigError("robot.kinematics", "<missing>", ROBOT_SPECS[1].allowed() + " (required)")
     kind = ROBOT_SPECS[1].coerce(flat["robot.kinematics"])
     cls = kinematics_class(kind)
+    description = description_class(kind)
     specs = ROBOT_SPECS + cls.param_specs(flat)
-    return specs, cls
+    if description is not None:
+        specs += description.param_specs(flat)
+    return specs, cls, description
 
 
 def build_model(flat: Mapping[str, Any]) -> tuple[RobotModel, list[ParamSpec]]:
@@ -401,9 +411,11 @@ def build_model(flat: Mapping[str, Any]) -> tuple[RobotModel, list[ParamSpec]]:
 
     Returns the model and the specs it consumed (the caller checks the rest).
     """
-    specs, cls = model_specs(flat)
+    specs, cls, description = model_specs(flat)
     values = validate(specs, flat)
     kinematics = cls.from_params(values)
+    if description is not None:
+        description.check(kinematics, values)
     jspecs = [s for j in kinematics.joint_names for s in joint_specs(j)]
     jvalues = validate(jspecs, flat)
     values.update(jvalues)

@@ -15,8 +15,9 @@ Lifecycle (ros2_control's hardware interface, python-can's ``BusABC``)::
 
 All joint arrays are in the model's ``joint_names`` order, in joint units
 (rad, rad/s, N m) -- gear ratios, encoder counts and direction signs are the
-backend's business. Backends are found by name in :data:`DRIVER_REGISTRY` and
-imported lazily, so a user of the simulator needs no CAN library.
+backend's business. Backends are found by name among the ``holonomic.drivers``
+entry points (:mod:`holonomic_core.plugins`) and imported lazily, so a user of
+the simulator needs no CAN library.
 
 The controller never asks which backend it has: optional capabilities
 (``sim_time``, ``ground_truth``) are methods that return ``None`` on
@@ -27,13 +28,13 @@ from __future__ import annotations
 
 import abc
 import enum
-import importlib
 from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
 
-from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_core import plugins
+from holonomic_core.schema import ParamSpec
 
 
 class DriverError(RuntimeError):
@@ -229,41 +230,22 @@ class Driver(abc.ABC):
                 f"{self.name}: operation needs state {state.value}, driver is {self._state.value}")
 
 
-#: backend name -> "module:Class"
-DRIVER_REGISTRY: dict[str, str] = {
-    "sim": "holonomic_sim.sim_driver:SimDriver",
-    "mock": "holonomic_core.mock_driver:MockDriver",
-    "odrive_can": "holonomic_drivers.odrive_can:OdriveCanDriver",
-    "cia402": "holonomic_drivers.cia402:Cia402Driver",
-}
-
-
-#: ``--sim-drives``: a function of a CAN backend class -> the driver class that
-#: runs it on emulated drives whose motors are simulated joints
-SIM_DRIVES = "holonomic_sim.sim_drives:sim_drives_driver"
-
-
-def _import(target: str, key: str, value, wanted: str):
-    """``"module:attribute"`` imported now; ConfigError(key, value, wanted) if it cannot be."""
-    module_name, _, attribute = target.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise ConfigError(key, value, f"{wanted} ({module_name}: {exc})") from exc
-    return getattr(module, attribute)
+def driver_names() -> tuple[str, ...]:
+    """Names of the installed backends (``holonomic.drivers`` entry points)."""
+    return plugins.names("drivers")
 
 
 def sim_drives_driver(backend: type[Driver]) -> type[Driver]:
-    """The ``sim_drives`` driver class for ``backend`` (imported only now);
-    ConfigError for a backend that is not a CAN backend."""
-    return _import(SIM_DRIVES, "sim_drives", True,
-                   "false: the simulator is not installed")(backend)
+    """The ``sim_drives`` driver class for ``backend`` (the
+    ``holonomic.driver_adapters`` entry point ``sim_drives``, imported only
+    now); ConfigError where the simulator is not installed or ``backend`` is
+    not a CAN backend."""
+    adapter = plugins.load("driver_adapters", "sim_drives", "sim_drives",
+                           wanted="false: the simulator is not installed")
+    return adapter(backend)
 
 
 def driver_class(name: str) -> type[Driver]:
-    """Resolve a backend name, importing its module only now."""
-    try:
-        target = DRIVER_REGISTRY[name]
-    except KeyError:
-        raise ConfigError("driver", name, f"one of {sorted(DRIVER_REGISTRY)}") from None
-    return _import(target, "driver", name, "a backend whose package is installed")
+    """Resolve a backend name (``holonomic.drivers`` entry point), importing
+    its module only now."""
+    return plugins.load("drivers", name, "driver")

@@ -1,4 +1,4 @@
-"""The kinematics protocol every base family implements, and their registry.
+"""The kinematics protocol every base family implements, and its lookup.
 
 A base's kinematics map joint rates to the planar body twist of ``base_link``
 and back. Conventions (REP 103, docs/conventions.md):
@@ -14,12 +14,12 @@ state (joint positions, odometry) lives in the caller.
 from __future__ import annotations
 
 import abc
-import importlib
 from typing import Mapping
 
 import numpy as np
 
-from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_core import plugins
+from holonomic_core.schema import ParamSpec
 
 #: The estimators ``forward`` understands (docs/conventions.md, Python API).
 ESTIMATORS = ("slip_min", "pinv", "robust")
@@ -87,26 +87,7 @@ class BaseKinematics(abc.ABC):
         """Build from validated flat parameters; raise :class:`ConfigError`."""
 
 
-#: name -> "module:Class", imported lazily so that a DDROT user needs no
-#: PCV code and the core package imports none of the families.
-KINEMATICS_REGISTRY: dict[str, str] = {
-    "ddrot": "hamr_base.offset_turret:OffsetTurretKinematics",
-    "pcv": "pcv_base.powered_caster:PoweredCasterKinematics",
-}
-
-
 def kinematics_class(kind: str) -> type[BaseKinematics]:
-    """Resolve a ``robot.kinematics`` value to its class."""
-    try:
-        target = KINEMATICS_REGISTRY[kind]
-    except KeyError:
-        raise ConfigError(
-            "robot.kinematics", kind,
-            f"one of {sorted(KINEMATICS_REGISTRY)}") from None
-    module_name, _, class_name = target.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:  # package missing from the environment
-        raise ConfigError("robot.kinematics", kind,
-                          f"an installed family ({module_name}: {exc})") from exc
-    return getattr(module, class_name)
+    """Resolve a ``robot.kinematics`` value to its class (the installed
+    ``holonomic.kinematics`` entry point of that name, imported only now)."""
+    return plugins.load("kinematics", kind, "robot.kinematics")

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from holonomic_core.se2 import integrate_arc
+from holonomic_core.se2 import compose_arc, wrap_angle
 
 
 @dataclass(frozen=True)
@@ -217,7 +217,8 @@ class Odometry:
         """Compose the displacement; grow the covariance (slip2_dt: rho^2 dt [m^2/s])."""
         dx, dy, dth = disp.tolist()
         x, y, heading = self.pose.tolist()
-        self.pose[:] = integrate_arc((x, y, heading), dx, dy, dth)
+        wx, wy = compose_arc((x, y, heading), dx, dy, dth)
+        self.pose[:] = (x + wx, y + wy, wrap_angle(heading + dth))
         # Covariance: P' = F P F^T + G Q G^T, F = d(pose')/d(pose), G maps
         # body-frame increment noise to the odom frame.
         dist = math.hypot(dx, dy)

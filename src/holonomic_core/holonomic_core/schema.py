@@ -98,7 +98,9 @@ class ParamSpec:
                 raise ConfigError(self.name, value, self.allowed())
             out = value
             if self.choices and out not in self.choices:
-                raise ConfigError(self.name, value, self.allowed())
+                nearest = difflib.get_close_matches(out, self.choices, n=1)
+                raise ConfigError(self.name, value, self.allowed() + (
+                    f"; did you mean '{nearest[0]}'?" if nearest else ""))
         elif self.type == "double_array":
             if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
                 raise ConfigError(self.name, value, self.allowed())

@@ -49,6 +49,16 @@ def relative_pose(start, end) -> np.ndarray:
     return np.array([dx, dy, wrap_angle(end[2] - start[2])])
 
 
+def relative_poses(starts, ends) -> np.ndarray:
+    """Row-wise :func:`relative_pose` of two (k x 3) arrays of poses; the
+    headings wrapped to [-pi, pi) as by :func:`wrap_angles`."""
+    starts, ends = np.asarray(starts, float), np.asarray(ends, float)
+    d = ends - starts
+    c, s = np.cos(starts[:, 2]), np.sin(starts[:, 2])
+    return np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1],
+                            wrap_angles(d[:, 2])))
+
+
 def compose_arc(pose, dx: float, dy: float, dtheta: float) -> tuple[float, float]:
     """World-frame displacement [m] of a constant-twist arc.
 

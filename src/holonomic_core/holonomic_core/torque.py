@@ -20,31 +20,28 @@ pose on every arming.
 
 from __future__ import annotations
 
-import importlib
 import math
 
 import numpy as np
 
 from holonomic_core.se2 import compose, integrate_arc, relative_pose, rotate
+from holonomic_core import plugins
 from holonomic_core.schema import ConfigError
-
-#: kinematics kind -> "module:Class" of its dynamic model (lazily imported)
-DYNAMICS_REGISTRY = {"pcv": "pcv_base.dynamics:PcvDynamics"}
 
 #: largest position / heading error the reference may run ahead [m, rad]
 MAX_ERROR = (0.15, 0.15, 0.3)
 
 
 def dynamics_for(model):
-    """The dynamic model of ``model`` or ConfigError if its family has none."""
-    target = DYNAMICS_REGISTRY.get(model.kind)
-    if target is None:
+    """The dynamic model of ``model`` (its family's ``holonomic.dynamics`` entry
+    point) or ConfigError if its family has none."""
+    if not plugins.provides("dynamics", model.kind):
         raise ConfigError("control_mode", "torque",
                           f"'velocity' for kinematics '{model.kind}' (torque mode needs a "
-                          f"dynamic model; families with one: {sorted(DYNAMICS_REGISTRY)})")
-    module, _, name = target.partition(":")
+                          f"dynamic model; families with one: {list(plugins.names('dynamics'))})")
+    dynamics = plugins.load("dynamics", model.kind, "control_mode")
     try:
-        return getattr(importlib.import_module(module), name).from_model(model)
+        return dynamics.from_model(model)
     except ValueError as exc:
         raise ConfigError("control_mode", "torque", f"'velocity' for this robot ({exc})") from exc
 

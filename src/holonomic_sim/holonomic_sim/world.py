@@ -16,9 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as pb
 
+from holonomic_core.description import frictionless_links, generate_urdf
 from holonomic_core.link_transforms import rotate
-from holonomic_core.se2 import relative_pose, yaw_of_quaternion
-from holonomic_sim.urdf import frictionless_links, generate_urdf
+from holonomic_core.se2 import relative_pose, rotate as rotate_2d, yaw_of_quaternion
 
 
 #: [m] how high a lifted base (a bench test) is held above its resting height
@@ -286,10 +286,9 @@ class SimRobot:
         r = self._com_offset(orientation)
         linear = (com_linear[0] - (angular[1] * r[2] - angular[2] * r[1]),
                   com_linear[1] - (angular[2] * r[0] - angular[0] * r[2]))
-        yaw = yaw_of_quaternion(orientation)
-        c, s = math.cos(yaw), math.sin(yaw)
-        return np.array([c * linear[0] + s * linear[1], -s * linear[0] + c * linear[1],
-                         angular[2]])
+        # into base_link
+        vx, vy = rotate_2d(linear[0], linear[1], -yaw_of_quaternion(orientation))
+        return np.array([vx, vy, angular[2]])
 
     def tilt(self) -> float:
         """Angle [rad] between base_link's z axis and the vertical (tip-over check)."""

@@ -58,7 +58,7 @@ class BodyParams:
     @classmethod
     def from_model(cls, model) -> "BodyParams":
         """The inertias the simulator's URDF gives the same bodies
-        (holonomic_sim.urdf.pcv_urdf: solid box, box, cylinder)."""
+        (pcv_base.description: solid box, box, cylinder)."""
         p, k = model.params, model.kinematics
         m_c, m_f, m_w = p["body.chassis.mass"], p["body.fork.mass"], p["body.wheel.mass"]
         length, width = p["body.chassis.length"], p["body.chassis.width"]

@@ -466,23 +466,6 @@ class PoweredCasterKinematics(BaseKinematics):
                       "Caster offset b [m] of every caster: horizontal distance from the "
                       "steering axis back to the wheel's contact point (per-caster "
                       "override: pcv.NAME.caster_offset).", minimum=0.0, maximum=10.0),
-            ParamSpec("body.chassis.mass", "double", "Mass of the chassis with payload [kg].",
-                      default=60.0, minimum=0.0, exclusive_minimum=True, maximum=1e4),
-            ParamSpec("body.chassis.length", "double", "Chassis box length along x [m].",
-                      default=0.5, minimum=0.0, exclusive_minimum=True, maximum=100.0),
-            ParamSpec("body.chassis.width", "double", "Chassis box width along y [m].",
-                      default=0.5, minimum=0.0, exclusive_minimum=True, maximum=100.0),
-            ParamSpec("body.chassis.height", "double", "Chassis box height [m].",
-                      default=0.1, minimum=0.0, exclusive_minimum=True, maximum=100.0),
-            ParamSpec("body.fork.mass", "double", "Mass of one caster fork [kg].",
-                      default=0.8, minimum=0.0, exclusive_minimum=True, maximum=1e3),
-            ParamSpec("body.fork.height", "double",
-                      "Drop from the chassis bottom to the wheel axle [m].",
-                      default=0.04, minimum=0.0, exclusive_minimum=True, maximum=10.0),
-            ParamSpec("body.wheel.mass", "double", "Mass of one wheel [kg].",
-                      default=0.5, minimum=0.0, exclusive_minimum=True, maximum=1e3),
-            ParamSpec("body.wheel.width", "double", "Width of a wheel [m].",
-                      default=0.03, minimum=0.0, exclusive_minimum=True, maximum=10.0),
         ]
         names = params.get("pcv.casters")
         if isinstance(names, (list, tuple)) and all(isinstance(n, str) for n in names):
@@ -516,22 +499,7 @@ class PoweredCasterKinematics(BaseKinematics):
         casters = [Caster(name, values[f"pcv.{name}.h"], values[f"pcv.{name}.beta"],
                           values[f"pcv.{name}.wheel_radius"], values[f"pcv.{name}.caster_offset"])
                    for name in values["pcv.casters"]]
-        kin = cls(casters)
-        # The wheels' swept discs (plan view: a 2r x w rectangle at distance b
-        # from the axis, turning about it) must not intersect (Holmberg &
-        # Khatib, Sec. 2), or the simulated and the real wheels collide.
-        w = values["body.wheel.width"]
-        swept = [math.hypot(c.caster_offset + c.wheel_radius, w / 2) for c in kin.casters]
-        for i, ci in enumerate(kin.casters):
-            for j in range(i + 1, len(kin.casters)):
-                cj = kin.casters[j]
-                dist = math.dist(ci.axis, cj.axis)
-                if dist <= swept[i] + swept[j]:
-                    raise ConfigError(f"pcv.{cj.name}.h", cj.h,
-                                      f"steering axes of {ci.name} and {cj.name} more than "
-                                      f"{swept[i] + swept[j]:.3f} m apart (the wheels' swept "
-                                      f"discs overlap at {dist:.3f} m)")
-        return kin
+        return cls(casters)
 
 
 def check_caster_names(names: list[str]) -> None:
