@@ -136,6 +136,10 @@ BASE_CONTROLLER = [
     (["--ros-args", "-p", "robot_config:=hamrr"], "did you mean 'hamr'"),
     (["--ros-args", "-p", "robot_config:=hamr", "-p", "cmd_timout:=1.0"],
      "did you mean 'cmd_timeout'"),
+    # plugins by name (holonomic.drivers / holonomic.kinematics entry points)
+    (["--ros-args", "-p", "robot_config:=hamr", "-p", "driver:=sims"], "did you mean 'sim'"),
+    (["--ros-args", "-p", "robot_config:=hamr", "-p", "robot.kinematics:=ddrott"],
+     "did you mean 'ddrot'"),
 ]
 
 TABLES = {

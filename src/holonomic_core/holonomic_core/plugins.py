@@ -5,8 +5,8 @@ what it provides in its ``setup.py`` under a Python entry point group
 (python-can's ``can.interface`` pattern), and the core looks it up by name::
 
     entry_points={
-        "holonomic.kinematics": ["ddrot = hamr_base.offset_turret:OffsetTurretKinematics"],
-        "holonomic.drivers": ["odrive_can = holonomic_drivers.odrive_can:OdriveCanDriver"],
+        "holonomic.kinematics": ["mecanum = my_base.kinematics:MecanumKinematics"],
+        "holonomic.drivers": ["my_drive = my_drives.backend:MyDriveDriver"],
     }
 
 A new robot family or driver is a new package with its entry points: no
