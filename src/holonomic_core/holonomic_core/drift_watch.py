@@ -25,6 +25,7 @@ from typing import Mapping
 
 import numpy as np
 
+from holonomic_core import plugins
 from holonomic_core.calibration import (MAX_STDERR, family_for, jacobian, residual_function,
                                         samples_from_readings)
 from holonomic_core.schema import ParamSpec
@@ -78,8 +79,10 @@ class DriftWatch:
     @classmethod
     def from_config(cls, model, values: Mapping) -> "DriftWatch | None":
         """The watch configured by ``drift_watch.*``, or None where it does not
-        apply (disabled, or a base without redundant joints)."""
-        if not values["drift_watch.enabled"] or model.kind != "pcv":
+        apply (disabled, or a family whose joints alone cannot tell its
+        parameters: no redundant joints, or no calibration model)."""
+        if not values["drift_watch.enabled"] or not plugins.provides("calibration", model.kind) \
+                or not family_for(model).self_consistent:
             return None
         return cls(model, values["drift_watch.radius_threshold"],
                    values["drift_watch.offset_threshold"],
