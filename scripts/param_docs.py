@@ -57,7 +57,8 @@ def generate() -> str:
     lines = [BEGIN, ""]
     lines += _table("Robot", ROBOT_SPECS)
     lines += _table("DDROT geometry and body (`robot.kinematics: ddrot`)",
-                    OffsetTurretKinematics.param_specs({}) + OffsetTurretDescription.param_specs({}))
+                    OffsetTurretKinematics.param_specs({})
+                    + OffsetTurretDescription.param_specs({}))
     lines += _table("PCV geometry and body (`robot.kinematics: pcv`; NAME = each caster)",
                     PoweredCasterKinematics.param_specs({"pcv.casters": ["NAME"]})
                     + PoweredCasterDescription.param_specs({}))

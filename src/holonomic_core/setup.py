@@ -27,7 +27,7 @@ setup(
     description="ROS-free core: robot model, kinematics protocol, odometry, limits, driver interface",
     license="Apache-2.0",
     entry_points={
-        # the core's own backend, registered like every other (holonomic_core/plugins.py)
+        # its own backend, registered like every other (holonomic_core/plugins.py)
         "holonomic.drivers": ["mock = holonomic_core.mock_driver:MockDriver"],
     },
 )

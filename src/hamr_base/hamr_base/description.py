@@ -29,9 +29,7 @@ class OffsetTurretDescription(Description):
     @classmethod
     def param_specs(cls, params: Mapping[str, object]) -> list[ParamSpec]:
         return [
-            # Physical body, read by the simulator's URDF generator (and by
-            # dynamics): masses [kg], lengths [m]. Inertias follow from the
-            # solid shapes.
+            # masses [kg], lengths [m]; inertias follow from the solid shapes
             _positive("body.drive_base.mass", "Mass of the drive base [kg].", 14.0, 1e4),
             _positive("body.drive_base.length",
                       "Length of the drive base box along its forward axis [m].", 0.40),
@@ -67,13 +65,14 @@ class OffsetTurretDescription(Description):
     def urdf(cls, model) -> str:
         """URDF of a differential drive with an offset turret.
 
-        ``base_link`` (root) is the turret disc, origin on the turret axis on the
-        floor, the disc at :meth:`base_height`. ``turret_joint`` (axis -z, so its angle is the turret's angle relative to
-        the drive base, CCW positive) carries ``drive_base``, whose frame is on
-        the turret axis at axle height with x along the drive base's forward
-        axis; the axle midpoint is ``b`` behind the turret axis. The wheels roll
-        forward for positive angles (axis +y). Two frictionless balls at the front
-        and back of the drive base stand in for the passive casters.
+        ``base_link`` (root) is the turret disc, origin on the turret axis on
+        the floor, the disc at :meth:`base_height`. ``turret_joint`` (axis -z,
+        so its angle is the turret's angle relative to the drive base, CCW
+        positive) carries ``drive_base``, whose frame is on the turret axis at
+        axle height with x along the drive base's forward axis; the axle
+        midpoint is ``b`` behind the turret axis. The wheels roll forward for
+        positive angles (axis +y). Two frictionless balls at the front and back
+        of the drive base stand in for the passive casters.
         """
         k, p = model.kinematics, model.params
         r, a, b = k.r, k.a, k.b
@@ -98,7 +97,8 @@ class OffsetTurretDescription(Description):
         # go light at random, and the base turns without its wheels knowing.
         ball_x = length / 2 - r_s
         m_w_total = 2 * m_w
-        com_x = (m_t * b + m_db * 0.0 + m_w_total * 0.0) / (m_t + m_db + m_w_total)  # from the axle
+        # from the axle
+        com_x = (m_t * b + m_db * 0.0 + m_w_total * 0.0) / (m_t + m_db + m_w_total)
         front_z = r_s - r if com_x >= 0 else r_s - r + BALL_CLEARANCE
         back_z = r_s - r + BALL_CLEARANCE if com_x >= 0 else r_s - r
         parts.append(

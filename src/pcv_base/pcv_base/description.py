@@ -63,7 +63,8 @@ class PoweredCasterDescription(Description):
     def base_height(cls, model) -> float:
         """Height [m] of the chassis box's centre above the floor (and base_link)."""
         p = model.params
-        return float(model.kinematics.r.max()) + p["body.fork.height"] + p["body.chassis.height"] / 2
+        return (float(model.kinematics.r.max()) + p["body.fork.height"]
+                + p["body.chassis.height"] / 2)
 
     @classmethod
     def urdf(cls, model) -> str:
@@ -87,7 +88,8 @@ class PoweredCasterDescription(Description):
         height = cls.base_height(model)
         parts = ['<link name="base_link">'
                  + inertial(m_c, Inertia.box(m_c, length, width, h_c), (0, 0, height))
-                 + visual_and_collision(box(length, width, h_c), (0, 0, height), material="body") + "</link>"]
+                 + visual_and_collision(box(length, width, h_c), (0, 0, height), material="body")
+                 + "</link>"]
         for caster in k.casters:
             r, b = caster.wheel_radius, caster.caster_offset
             drop = height - h_c / 2 - r              # steering joint to wheel axle [m]
