@@ -290,7 +290,7 @@ class RobotConfig:
 
 def config_from_flat(flat: Mapping[str, Any], source: str = "") -> RobotConfig:
     """Validate a flat parameter dict (file + overrides) into a RobotConfig."""
-    model, model_specs = build_model(flat)
+    model, mspecs = build_model(flat)
     values = dict(model.params)
     values.update(validate(CONTROLLER_SPECS, flat))
     controller = ControllerConfig.from_values(values)
@@ -308,7 +308,7 @@ def config_from_flat(flat: Mapping[str, Any], source: str = "") -> RobotConfig:
     # Keys of the backends not in use (e.g. `sim.*` on a real robot) are
     # allowed in the file; anything else unknown is a typo.
     others = tuple(f"{name}." for name in driver_names() if name != controller.driver)
-    specs = tuple(model_specs + CONTROLLER_SPECS + dspecs)
+    specs = tuple(mspecs + CONTROLLER_SPECS + dspecs)
     check_no_unknown(list(specs), flat, ignore_prefixes=others)
     return RobotConfig(model, controller, dcls, specs, values, source)
 
