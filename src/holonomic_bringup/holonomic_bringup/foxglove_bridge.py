@@ -54,8 +54,8 @@ from foxglove.messages import (FrameTransform, FrameTransforms, Pose, PosesInFra
                                Timestamp, Vector3)
 from foxglove.websocket import Capability
 
-from holonomic_core.link_transforms import LinkTree, axis_angle
-from holonomic_core.se2 import wrap_angle
+from holonomic_core.link_transforms import LinkTree
+from holonomic_core.se2 import quaternion_of_yaw, wrap_angle
 
 #: the Foxglove app's default port
 DEFAULT_PORT = 8765
@@ -136,7 +136,7 @@ class RobotDescription:
 
 
 def _yaw_quaternion(yaw: float) -> dict:
-    return dict(zip("xyzw", axis_angle((0.0, 0.0, 1.0), yaw)))
+    return dict(zip("xyzw", quaternion_of_yaw(yaw)))
 
 
 def _stamp(ns: int) -> dict:
