@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
-from holonomic_core.se2 import compose, integrate_arc, relative_pose, rotate
 from holonomic_core import plugins
+from holonomic_core.se2 import compose, integrate_arc, relative_pose, rotate
 from holonomic_core.schema import ConfigError
 
 #: largest position / heading error the reference may run ahead [m, rad]
