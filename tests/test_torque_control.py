@@ -79,7 +79,6 @@ def measured_acceleration(driver, torques, steps=5):
 def test_model_predicts_the_simulated_acceleration(xr4000_sim):
     cfg, driver, ctrl = xr4000_sim
     dyn = PcvDynamics.from_model(cfg.model)
-    kin = cfg.model.kinematics
     rng = np.random.default_rng(1)
     for _ in range(6):
         for _ in range(40):                       # keep it moving and turning
@@ -88,7 +87,7 @@ def test_model_predicts_the_simulated_acceleration(xr4000_sim):
         q = ctrl.reading.positions.copy()
         twist = driver._robot.body_twist()
         wrench = rng.normal(0, 1, 3) * np.array([25.0, 25.0, 5.0])
-        torques = kin.torque_distribution(q, wrench)            # F = C^T Gamma'
+        torques = dyn.torque_distribution(q, wrench)            # F = C^T Gamma'
         predicted = dyn.acceleration(q, twist, wrench)           # Lambda^-1 (F - mu)
         measured = measured_acceleration(driver, torques)
         # pybullet's contacts are compliant and slip a little: 3 % of the
@@ -101,7 +100,6 @@ def test_unit_control_force_gives_the_commanded_acceleration(xr4000_sim):
     """Decoupling: F = Lambda F* + mu makes the base a unit mass per axis."""
     cfg, driver, ctrl = xr4000_sim
     dyn = PcvDynamics.from_model(cfg.model)
-    kin = cfg.model.kinematics
     for f_star in np.eye(3):
         for _ in range(40):
             ctrl.set_command((0.3, 0.1, 0.4))
@@ -109,7 +107,7 @@ def test_unit_control_force_gives_the_commanded_acceleration(xr4000_sim):
         q = ctrl.reading.positions.copy()
         twist = driver._robot.body_twist()
         wrench = dyn.mass_matrix(q) @ f_star + dyn.bias(q, twist)
-        measured = measured_acceleration(driver, kin.torque_distribution(q, wrench))
+        measured = measured_acceleration(driver, dyn.torque_distribution(q, wrench))
         assert measured == pytest.approx(f_star, abs=0.05), (f_star, measured)
         driver._robot.command_velocities(ctrl.joint_command)
 
