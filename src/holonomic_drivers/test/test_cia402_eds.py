@@ -3,7 +3,7 @@
 Each drive is an ``EmulatedCia402Drive`` built from the same file
 (canopen's LocalNode: its SDO server enforces the file's types and access
 rights, and the drive refuses PDO mappings the file does not allow). The
-files under tests/data/cia402 are ours (see its README): each reproduces a
+files under src/holonomic_drivers/test/data/cia402 are ours (see its README): each reproduces a
 way in which real drives differ from the generic one. Every file goes
 through configure, enable, velocity commands, readings, a fault and a stop;
 then each feature is checked on the wire.
@@ -23,7 +23,7 @@ import canopen
 import numpy as np
 import pytest
 
-from can_rig import CanRig
+from holonomic_testing.can_rig import CanRig
 from holonomic_core.controller import load_config
 from holonomic_core.driver import DriverFault
 from holonomic_core.model import resolve_config

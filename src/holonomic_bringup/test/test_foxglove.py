@@ -1,6 +1,6 @@
 """holonomic-bringup --foxglove end to end, seen by an independent Foxglove
-WebSocket client (tests/foxglove_client.py: the protocol written out with
-the `websockets` library, none of the server's code), with a ROS probe
+WebSocket client (holonomic_testing.foxglove_client: the protocol written
+out with the `websockets` library, none of the server's code), with a ROS probe
 node driving the robot and watching its ground truth."""
 
 import json
@@ -18,12 +18,13 @@ import numpy as np
 import pytest
 from tf2_msgs.msg import TFMessage
 
-from foxglove_client import FoxgloveClient, decode_frame_transforms, pitch_angle, yaw_of
 from holonomic_core.model import load_model
-from ros_probe import Bringup, Probe, wait_until
+from holonomic_testing.foxglove_client import (FoxgloveClient, decode_frame_transforms,
+                                               pitch_angle, yaw_of)
+from holonomic_testing.ros_probe import Bringup, Probe, wait_until
 
 HAMR = load_model("hamr").kinematics
-LAYOUT = Path(__file__).resolve().parents[1] / "docs" / "foxglove" / "holonomic_base.json"
+LAYOUT = Path(__file__).resolve().parents[3] / "docs" / "foxglove" / "holonomic_base.json"
 #: ROS topics the MCAP recorder writes that the bridge does not serve live
 RECORDED_ONLY = {"/cmd_vel"}
 

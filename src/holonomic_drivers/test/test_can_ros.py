@@ -20,8 +20,8 @@ from holonomic_bringup.base_controller_node import BaseControllerNode
 from holonomic_core.model import load_model
 from holonomic_drivers import odrive_protocol as proto
 from holonomic_drivers.emulation import EmulatedOdriveAxis, EmulatorThread
-from can_rig import unique_channel
-from ros_probe import Probe, wait_until
+from holonomic_testing.can_rig import unique_channel
+from holonomic_testing.ros_probe import Probe, wait_until
 
 NS = "canbot"
 

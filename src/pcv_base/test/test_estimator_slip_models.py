@@ -26,7 +26,7 @@ Slip models (fixed seeds):
 * ``mixture``: conflict (3 cm/s) + noise, and in 30 % of the cycles a burst.
 
 Run this file to print the table of the three estimators per model
-(``.venv/bin/python tests/test_estimator_slip_models.py``).
+(``.venv/bin/python src/pcv_base/test/test_estimator_slip_models.py``).
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ from rcl_interfaces.srv import GetParameters
 
 from holonomic_core.controller import load_config
 from holonomic_sim.sim_driver import SimDriver
-from ros_probe import Bringup, Probe, wait_until
+from holonomic_testing.ros_probe import Bringup, Probe, wait_until
 
 #: the hidden faults of the recorded robot (steering zeros up to +-3 deg)
 FAULTS = ["-p", "sim.steer_zero_spread:=0.0524", "-p", "sim.seed:=4"]

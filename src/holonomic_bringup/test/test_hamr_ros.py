@@ -15,7 +15,7 @@ from tf2_msgs.msg import TFMessage
 
 from std_srvs.srv import Trigger
 
-from ros_probe import Bringup, Probe, drive_script, wait_until
+from holonomic_testing.ros_probe import Bringup, Probe, drive_script, wait_until
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ Each file is the generic CiA 402 drive of
 two features changed that real drives differ in, exported with canopen's
 own EDS writer. Run from the repository root after ``make setup``:
 
-    . ros2_ws/env.sh && python tests/data/cia402/make_eds.py
+    . ros2_ws/env.sh && python src/holonomic_drivers/test/data/cia402/make_eds.py
 """
 
 from pathlib import Path

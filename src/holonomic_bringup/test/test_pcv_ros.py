@@ -11,7 +11,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 
 from holonomic_core.model import load_model
-from ros_probe import Bringup, Probe, drive_script, wait_until
+from holonomic_testing.ros_probe import Bringup, Probe, drive_script, wait_until
 
 
 @pytest.fixture(scope="module", params=["xr4000", "comr3"])

@@ -14,7 +14,7 @@ from holonomic_core.loop import ManualClock
 from holonomic_core.schema import ConfigError
 from holonomic_core.torque import OperationalSpaceController
 from pcv_base.dynamics import PcvDynamics
-from ros_probe import Bringup, Probe, wait_until
+from holonomic_testing.ros_probe import Bringup, Probe, wait_until
 
 
 @pytest.fixture

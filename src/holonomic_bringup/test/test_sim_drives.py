@@ -25,7 +25,7 @@ from holonomic_core.controller import BaseController, ControllerState, load_conf
 from holonomic_core.driver import JointReading
 from holonomic_core.schema import ConfigError
 from holonomic_sim.joint_motor import SimulatedJointMotor, SimulatedJoints
-from ros_probe import Probe, relative_pose
+from holonomic_testing.ros_probe import Probe, relative_pose
 
 
 #: These tests are about motion and mapping, not timing: the drives may

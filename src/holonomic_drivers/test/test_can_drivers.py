@@ -13,7 +13,7 @@ import can
 import numpy as np
 import pytest
 
-from can_rig import CanRig
+from holonomic_testing.can_rig import CanRig
 from holonomic_core.controller import ControllerState, load_config
 from holonomic_core.driver import DriverCommunicationError
 from holonomic_core.model import resolve_config

@@ -1,6 +1,6 @@
 """Publish cmd_vel as fast as asked, from its own process (the flood test).
 
-Usage: python flood_publisher.py TOPIC RATE_HZ SECONDS FINAL_VX FINAL_VY FINAL_WZ
+Usage: python -m holonomic_testing.flood_publisher TOPIC RATE_HZ SECONDS FINAL_VX FINAL_VY FINAL_WZ
 Publishes alternating hostile-but-finite twists at RATE_HZ for SECONDS, then
 the final twist for 3 s at 20 Hz (which must win), and prints the achieved rate.
 """

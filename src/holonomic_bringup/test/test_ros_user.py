@@ -17,10 +17,10 @@ import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from ros_probe import (Bringup, Probe, Teleop, claim_domain_id, relative_pose, spin_in_thread,
-                       wait_until)
+from holonomic_testing.ros_probe import (Bringup, Probe, Teleop, claim_domain_id, relative_pose,
+                                         spin_in_thread, wait_until)
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def read_recording(path):

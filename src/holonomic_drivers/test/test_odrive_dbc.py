@@ -30,8 +30,8 @@ from holonomic_core.controller import load_config
 from holonomic_core.driver import DriverFault
 from holonomic_core.schema import ConfigError
 from holonomic_drivers import odrive_protocol as proto
-from can_rig import CanRig, unique_channel
-from ros_probe import wait_until
+from holonomic_testing.can_rig import CanRig, unique_channel
+from holonomic_testing.ros_probe import wait_until
 
 DBC_FILES = {"0.6": "odrive-cansimple-0.6.10.dbc", "0.5": "odrive-cansimple-0.5.6.dbc"}
 

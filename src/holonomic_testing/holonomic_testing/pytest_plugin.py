@@ -1,6 +1,11 @@
 """Test-session set-up: a private ROS domain, localhost-only discovery, and
 fixtures to run the real stack (holonomic-bringup subprocesses) against an
-in-process probe node."""
+in-process probe node.
+
+The shared fixtures of every package's tests, in one place: a pytest plugin
+registered through the ``pytest11`` entry point (setup.py), so that
+``make test`` over all packages and ``colcon test --packages-select <pkg>``
+load the same set-up."""
 
 from __future__ import annotations
 
@@ -10,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from ros_probe import Bringup, claim_domain_id, spin_in_thread
+from holonomic_testing.ros_probe import Bringup, claim_domain_id, spin_in_thread
 
 
 def pytest_configure(config):

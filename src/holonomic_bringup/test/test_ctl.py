@@ -11,7 +11,7 @@ import subprocess
 import pytest
 
 from holonomic_bringup.ctl import format_status, status_from_diagnostics
-from ros_probe import Bringup, Probe, wait_until
+from holonomic_testing.ros_probe import Bringup, Probe, wait_until
 
 
 def ctl(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:

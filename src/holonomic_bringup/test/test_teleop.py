@@ -10,7 +10,7 @@ import pytest
 from geometry_msgs.msg import Twist, TwistStamped
 
 from holonomic_bringup.teleop import TeleopState
-from ros_probe import Bringup, Probe, Teleop, relative_pose, wait_until
+from holonomic_testing.ros_probe import Bringup, Probe, Teleop, relative_pose, wait_until
 
 
 def state(timeout=0.7):

@@ -15,7 +15,7 @@ import pytest
 from geometry_msgs.msg import TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from ros_probe import Probe, wait_until
+from holonomic_testing.ros_probe import Probe, wait_until
 
 STARTED = "on driver"                      # the node's start-up log line
 STOPPED = "motors stopped and disarmed"
@@ -126,7 +126,7 @@ def test_a_10_khz_cmd_vel_flood_for_30_s_keeps_the_loop_rate_and_memory(ros, sta
         time.sleep(2.0)
         rss_start = _rss_kib(proc.proc.pid)
         flood = subprocess.Popen(
-            [sys.executable, str(Path(__file__).with_name("flood_publisher.py")),
+            [sys.executable, "-m", "holonomic_testing.flood_publisher",
              "/flood/cmd_vel", "10000", "30", "0.3", "-0.2", "0.5"],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
         rates, rss = [], []

@@ -12,7 +12,7 @@ import struct
 import can
 import pytest
 
-from can_rig import CanRig
+from holonomic_testing.can_rig import CanRig
 from holonomic_drivers import cia402_protocol as co
 from holonomic_drivers import odrive_protocol as proto
 from holonomic_drivers.cia402 import pdo_configuration
