@@ -22,7 +22,8 @@ def pytest_configure(config):
     # Before anything imports rclpy; subprocesses inherit these.
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ["ROS_DOMAIN_ID"] = str(claim_domain_id())
-    os.environ.setdefault("ROS_LOG_DIR", str(Path(tempfile.gettempdir()) / "holonomic_test_ros_log"))
+    os.environ.setdefault("ROS_LOG_DIR",
+                          str(Path(tempfile.gettempdir()) / "holonomic_test_ros_log"))
 
 
 @pytest.fixture(scope="session")

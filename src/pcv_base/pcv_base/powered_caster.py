@@ -133,8 +133,9 @@ class PoweredCasterKinematics(BaseKinematics):
         #: control cycle's paths (inverse, the slip_min fit) run on them, since
         #: for n <= 8 casters a loop of scalar math costs a third of the same
         #: work as a dozen numpy calls on length-n arrays.
-        self.contact_geometry = tuple((float(c.axis[0]), float(c.axis[1]), float(c.caster_offset),
-                                float(c.wheel_radius)) for c in casters)
+        self.contact_geometry = tuple((float(c.axis[0]), float(c.axis[1]),
+                                       float(c.caster_offset), float(c.wheel_radius))
+                                      for c in casters)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
