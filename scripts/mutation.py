@@ -42,6 +42,8 @@ MODULES = {
                       ["src/hamr_base/test/test_offset_turret.py"]),
     "powered_caster": ("src/pcv_base/pcv_base/powered_caster.py",
                        ["src/pcv_base/test/test_powered_caster.py"]),
+    "pcv_estimators": ("src/pcv_base/pcv_base/estimators.py",
+                       ["src/pcv_base/test/test_powered_caster.py"]),
     "limits": ("src/holonomic_core/holonomic_core/limits.py",
                ["src/holonomic_core/test/test_limits_odometry.py",
                 "src/holonomic_core/test/test_controller_core.py",
