@@ -2,12 +2,13 @@
 # (scripts/setup.sh is idempotent and quick when nothing changed).
 # PYTHON=python3.12 chooses the interpreter of a new .venv; VENV=... WS=...
 # put the virtual environment and the colcon workspace elsewhere (e.g. a
-# second Python next to the first, as .ci/run does); TESTS=... runs a subset.
+# second Python next to the first, as .ci/run does); TESTS=... runs a subset
+# (default: every package's test/ folder, src/*/test).
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 VENV ?= .venv
 WS ?= ros2_ws
-TESTS ?= tests
+TESTS ?= $(wildcard src/*/test)
 ENV := . $(WS)/env.sh &&
 
 .PHONY: help setup demo test bench mutation clean

@@ -3,8 +3,9 @@
 For each module below, mutmut 2 changes one thing at a time (an operator, a
 number, a name, a keyword...) and runs the module's fast unit tests; a mutant
 the tests do not notice "survives". The run happens in a scratch copy of
-config/, src/ and tests/ (mutmut edits the file it mutates in place), so the
-working tree is never left mutated, even when the run is interrupted.
+config/ and src/ (with the packages' test/ folders; mutmut edits the file it
+mutates in place), so the working tree is never left mutated, even when the
+run is interrupted.
 
 Mutations of plain string literals are off: mutmut turns "text" into
 "XXtextXX", and in these modules such literals are mostly messages that the
@@ -38,34 +39,39 @@ SLOW = ("not test_any_sequence_of_commands_stays_within_limits and "
 #: module -> (file, pytest arguments: the fast unit tests that own it)
 MODULES = {
     "offset_turret": ("src/hamr_base/hamr_base/offset_turret.py",
-                      ["tests/test_offset_turret.py"]),
+                      ["src/hamr_base/test/test_offset_turret.py"]),
     "powered_caster": ("src/pcv_base/pcv_base/powered_caster.py",
-                       ["tests/test_powered_caster.py"]),
+                       ["src/pcv_base/test/test_powered_caster.py"]),
+    "pcv_estimators": ("src/pcv_base/pcv_base/estimators.py",
+                       ["src/pcv_base/test/test_powered_caster.py"]),
     "limits": ("src/holonomic_core/holonomic_core/limits.py",
-               ["tests/test_limits_odometry.py", "tests/test_controller_core.py",
-                "tests/test_hostile_commands.py", "-k", SLOW]),
+               ["src/holonomic_core/test/test_limits_odometry.py",
+                "src/holonomic_core/test/test_controller_core.py",
+                "src/holonomic_core/test/test_hostile_commands.py", "-k", SLOW]),
     "odometry": ("src/holonomic_core/holonomic_core/odometry.py",
-                 ["tests/test_limits_odometry.py", "tests/test_controller_core.py"]),
+                 ["src/holonomic_core/test/test_limits_odometry.py",
+                  "src/holonomic_core/test/test_controller_core.py"]),
     "monitor": ("src/holonomic_core/holonomic_core/monitor.py",
-                ["tests/test_reading_monitor.py"]),
+                ["src/holonomic_core/test/test_reading_monitor.py"]),
     "loop": ("src/holonomic_core/holonomic_core/loop.py",
-             ["tests/test_control_loop.py"]),
+             ["src/holonomic_core/test/test_control_loop.py"]),
     "controller": ("src/holonomic_core/holonomic_core/controller.py",
-                   ["tests/test_controller_core.py", "tests/test_reading_monitor.py",
-                    "tests/test_hostile_commands.py", "-k", SLOW]),
+                   ["src/holonomic_core/test/test_controller_core.py",
+                    "src/holonomic_core/test/test_reading_monitor.py",
+                    "src/holonomic_core/test/test_hostile_commands.py", "-k", SLOW]),
     "odrive_protocol": ("src/holonomic_drivers/holonomic_drivers/odrive_protocol.py",
-                        ["tests/test_can_protocols.py"]),
+                        ["src/holonomic_drivers/test/test_can_protocols.py"]),
     "cia402_protocol": ("src/holonomic_drivers/holonomic_drivers/cia402_protocol.py",
-                        ["tests/test_can_protocols.py"]),
+                        ["src/holonomic_drivers/test/test_can_protocols.py"]),
 }
 STATUS = {"ok_killed": "killed", "bad_survived": "survived", "bad_timeout": "timeout",
           "ok_suspicious": "suspicious", "skipped": "skipped", "untested": "untested"}
 
 
 def scratch_copy() -> Path:
-    """config/, src/, tests/ and pytest.ini in a fresh folder."""
+    """config/, src/ (the packages and their test/ folders) and pytest.ini in a fresh folder."""
     work = Path(tempfile.mkdtemp(prefix="holonomic_mutation_"))
-    for name in ("config", "src", "tests"):
+    for name in ("config", "src"):
         shutil.copytree(ROOT / name, work / name,
                         ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
     shutil.copy(ROOT / "pytest.ini", work / "pytest.ini")
@@ -103,7 +109,8 @@ def run_module(work: Path, name: str, out: Path, budget: float | None) -> dict[s
     env["PYTHONPATH"] = os.pathsep.join(packages + [env.get("PYTHONPATH", "")])
     env["HOLONOMIC_CONFIG_PATH"] = str(work / "config")
     cmd = [sys.executable, "-m", "mutmut", "run", "--paths-to-mutate", path,
-           "--runner", runner, "--tests-dir", "tests", "--disable-mutation-types", "string",
+           "--runner", runner, "--tests-dir", str(Path(tests[0]).parent),
+           "--disable-mutation-types", "string",
            "--simple-output", "--no-progress", "-b", "20"]
     started = time.monotonic()
     log = open(out / f"{name}.log", "w")

@@ -11,6 +11,8 @@ setup(
         ("share/" + PACKAGE, ["package.xml"]),
     ],
     install_requires=["setuptools"],
+    # colcon test runs pytest (not unittest) on test/ when pytest is a test dependency
+    extras_require={"test": ["pytest"]},
     zip_safe=True,
     maintainer="Holonomic base developers",
     maintainer_email="dev@holonomic.invalid",

@@ -21,7 +21,7 @@ isotropy results do not depend on it. The reference point is base_link's
 origin (the paper's is the triangle's centre O_b).
 
 Departures from the printed equations (each checked numerically in
-tests/test_analysis.py):
+src/holonomic_analysis/test/test_analysis.py):
 
 * eq. 4: the vertex vectors printed do not sum to zero (s3 = l/sqrt(3) (0, 1)
   with s1, s2 both at +1/2 in y). The fix that makes every later claim of the

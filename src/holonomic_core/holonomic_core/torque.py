@@ -124,10 +124,10 @@ class OperationalSpaceController:
     def distribute(self, positions, wrench) -> np.ndarray:
         """Joint torques producing ``wrench`` (F = C^T Gamma'), scaled into
         the torque limits."""
-        kin = self.model.kinematics
         if self.distribution == "slip_min":
-            torques = kin.torque_distribution(positions, wrench)      # C#^T F
+            torques = self.dynamics.torque_distribution(positions, wrench)      # C#^T F
         else:
+            kin = self.model.kinematics
             torques = np.linalg.pinv(kin.constraint_matrix(positions)).T @ wrench
         worst = float(np.max(np.abs(torques) / self.max_efforts))
         if not math.isfinite(worst):

@@ -42,6 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pcv_base.torque_distribution import torque_distribution
+
 
 @dataclass(frozen=True)
 class BodyParams:
@@ -177,3 +179,10 @@ class PcvDynamics:
         """x_ddot (body components) produced by ``wrench`` F at ``twist``."""
         lam, mu = self.terms(positions, twist)
         return np.linalg.solve(lam, np.asarray(wrench, float) - mu)
+
+    def torque_distribution(self, positions, wrench) -> np.ndarray:
+        """Joint torques [N m] ``Gamma' = C#^T F`` (eq. 14, in
+        :mod:`pcv_base.torque_distribution`) that produce ``wrench`` F (fx [N],
+        fy [N], tz [N m], base_link) at the joint ``positions`` [rad] with the
+        least contact forces."""
+        return torque_distribution(self.kin, positions, wrench)

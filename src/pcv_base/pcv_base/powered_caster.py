@@ -31,51 +31,10 @@ point still on the floor::
   printed form, the product, and a numeric differentiation of the rigid-body
   motion against each other.
 
-Estimators of the twist from measured joint rates (``forward``):
-
-* ``slip_min``: the paper's ``C# = C_p^+ C_q^-1`` (eq. 13): map the joint rates
-  to sensed contact velocities with ``C_q^-1`` and fit the rigid-body velocity
-  field to them in the least-squares sense -- it minimises the total contact
-  slip, in m/s, the same for every wheel and both directions;
-* ``pinv``: the Moore-Penrose inverse of ``C``, for comparison: it fits joint
-  rates, which weighs lateral slip by 1/b^2 and rolling slip by 1/r^2;
-* ``robust``: ``slip_min``, except when the slip is one contact that
-  disagrees with all the others (a wheel that spins or skids alone): then that
-  caster is left out. See :meth:`PoweredCasterKinematics._robust`.
-
-What the residual can tell apart. The sensed contact velocities are ``u =
-C_p x + s`` (slip ``s``, 2n entries); the fit sees only the residual ``(I -
-H) s`` with ``H = C_p C_p^+``, in the (2n - 3)-dimensional space orthogonal to
-the rigid-body motions. That space is also the space of *internal* forces
-(``C_p^T f = 0``: no net force, no net torque on the base), so actuator-conflict
-slip -- each contact yielding in proportion to the internal force the casters
-push on each other with -- lies in it entirely, and C# ignores it exactly
-(``C_p^+ s = 0``); it is why the paper chose C#. A single contact's burst
-``s = E_i d`` (2 rows of caster i) leaves a residual in the 2-dimensional
-subspace ``(I - H) E_i``, and leaving caster i out explains it completely.
-
-* 4 or more casters (2n - 3 >= 5): the subspaces of two casters meet only at
-  zero, so one outlier is located uniquely; disagreement spread over all
-  contacts is not confined to any of them.
-* 3 casters (3-dimensional residual, planes of 2): one outlier is located,
-  except along the lines where two casters' planes meet (then either caster
-  could be the culprit; the estimator keeps slip_min). Two simultaneous
-  outliers cannot be told apart from conflict.
-* 2 casters (4 equations, 3 unknowns, one redundant): the residual is one
-  number; both casters explain it equally, and so does conflict. An outlier
-  is detected but cannot be located: ``robust`` is ``slip_min``.
-
-What no residual can tell apart: conflict slip produced by *one* lagging
-caster, ``s = (I - H) E_i d``, gives the same sensed velocities as a burst
-``E_i d`` of that caster on a different rigid motion (``u = C_p (x - C_p^+ E_i
-d) + E_i d``). Grip decides between them: a tyre that grips yields by
-millimetres per second (micro-slip, a few % of its speed), a wheel that spins
-or skids departs by tenths of a metre per second. So a caster is rejected
-only when its disagreement with the others exceeds ``ROBUST_OUTLIER_SLIP``.
-
-The least-squares fit of a planar rigid velocity field has a closed form (its
-normal equations decouple about the weighted centroid of the contact points),
-so the estimators cost O(n) arithmetic with no matrix inversion per cycle.
+The estimators of the twist from measured joint rates (``slip_min`` = C#,
+``pinv``, ``robust``) are in :mod:`pcv_base.estimators`; the torque
+distribution C#^T F (eq. 14) is in :mod:`pcv_base.torque_distribution`,
+beside the dynamics.
 """
 
 from __future__ import annotations
@@ -87,27 +46,13 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from holonomic_core.kinematics import ESTIMATORS, BaseKinematics
+from holonomic_core.kinematics import BaseKinematics
 from holonomic_core.schema import ConfigError, ParamSpec, number_or_none
+from pcv_base.estimators import estimate
 
 #: why the caster offset must be > 0, for the error messages
 _ZERO_OFFSET = ("b = 0 makes a caster a steered wheel that cannot move sideways without "
                 "first turning: the base would not be holonomic")
-
-#: disagreement [m/s] of one caster with the rigid motion of the others above
-#: which the robust estimator calls it a burst (a gripping tyre's micro-slip
-#: stays at a few cm/s even at 1 m/s; a wheel that spins or skids is far off)
-ROBUST_OUTLIER_SLIP = 0.1
-#: at most this fraction of the residual energy (sum of squared contact
-#: residuals) may remain when the suspected caster is left out: the others
-#: must agree on one rigid motion (for spread conflict on 4 casters the
-#: fraction is Beta(3/2, 1)-distributed, below 0.05 in 1 % of cycles per caster)
-ROBUST_CONCENTRATION = 0.05
-#: ... and it must explain more than any other caster would, by this much
-#: [m/s] (as a root of residual energy): with 3 casters the residuals that
-#: two casters can explain meet along a line, and near it either could be the
-#: culprit (a relative margin fails there: the runner-up often explains 99 %)
-ROBUST_UNIQUENESS = 0.03
 
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -184,11 +129,13 @@ class PoweredCasterKinematics(BaseKinematics):
         self.sy = np.array([c.axis[1] for c in casters])
         self.r = np.array([c.wheel_radius for c in casters])
         self.b = np.array([c.caster_offset for c in casters])
-        # The control cycle's paths (inverse, the slip_min fit) run on Python
-        # floats: for n <= 8 casters a loop of scalar math costs a third of
-        # the same work as a dozen numpy calls on length-n arrays.
-        self._geometry = tuple((float(c.axis[0]), float(c.axis[1]), float(c.caster_offset),
-                                float(c.wheel_radius)) for c in casters)
+        #: per caster (sx [m], sy [m], b [m], r [m]) as Python floats: the
+        #: control cycle's paths (inverse, the slip_min fit) run on them, since
+        #: for n <= 8 casters a loop of scalar math costs a third of the same
+        #: work as a dozen numpy calls on length-n arrays.
+        self.contact_geometry = tuple((float(c.axis[0]), float(c.axis[1]),
+                                       float(c.caster_offset), float(c.wheel_radius))
+                                      for c in casters)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -273,7 +220,7 @@ class PoweredCasterKinematics(BaseKinematics):
         vx, vy, wz = float(twist[0]), float(twist[1]), float(twist[2])
         out = []
         cos, sin = math.cos, math.sin
-        for i, (sx, sy, b, r) in enumerate(self._geometry):
+        for i, (sx, sy, b, r) in enumerate(self.contact_geometry):
             phi = q[2 * i]
             c, s = cos(phi), sin(phi)
             vsx = vx - wz * sy
@@ -284,170 +231,28 @@ class PoweredCasterKinematics(BaseKinematics):
 
     def forward(self, positions: np.ndarray, velocities: np.ndarray,
                 estimator: str = "slip_min") -> np.ndarray:
-        """Body twist (vx, vy, wz) from joint rates with the chosen estimator."""
-        return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
-                              estimator)[0]
+        """Body twist (vx, vy, wz) [m/s, m/s, rad/s] of base_link from joint rates
+        [rad/s] with the chosen estimator (:mod:`pcv_base.estimators`)."""
+        return estimate(self, np.asarray(positions, float), np.asarray(velocities, float),
+                        estimator)[0]
 
     def fit_residual(self, positions: np.ndarray, velocities: np.ndarray,
                      estimator: str = "slip_min") -> np.ndarray:
         """Per caster, the norm [m/s] of the contact-velocity slip the chosen
         estimator's twist does not explain (0 for consistent joint rates)."""
-        return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
-                              estimator)[1]
+        return estimate(self, np.asarray(positions, float), np.asarray(velocities, float),
+                        estimator)[1]
 
     def estimate(self, positions: np.ndarray, velocities: np.ndarray,
                  estimator: str = "slip_min") -> tuple[np.ndarray, np.ndarray]:
         """Twist and per-caster residual from one fit (see BaseKinematics)."""
-        return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
-                              estimator)
-
-    def _fit(self, positions, velocities):
-        """The slip_min fit in scalar math, with what the robust test needs.
-
-        Returns the twist (vx, vy, wz) of base_link, the per-caster contact
-        residuals ``[(x, y, rx, ry)]`` (contact point [m] and the sensed
-        contact velocity minus the fitted one [m/s]), the contact centroid
-        ``(cx, cy)`` [m] and ``D = sum |p_i - c|^2`` [m^2]. About the
-        centroid the normal equations of the rigid fit decouple: the
-        translation there is the mean contact velocity and ``wz = sum q x u /
-        D`` with ``q = p - c`` -- O(n), no matrix inversion.
-        """
-        q, v = positions.tolist(), velocities.tolist()
-        cos, sin = math.cos, math.sin
-        pts = []
-        sum_x = sum_y = sum_u = sum_w = 0.0
-        for i, (sx, sy, b, r) in enumerate(self._geometry):
-            phi = q[2 * i]
-            c, s = cos(phi), sin(phi)
-            dphi, drho = v[2 * i], v[2 * i + 1]
-            x, y = sx - b * c, sy - b * s
-            u = -b * s * dphi + r * c * drho
-            w = b * c * dphi + r * s * drho
-            pts.append((x, y, u, w))
-            sum_x += x
-            sum_y += y
-            sum_u += u
-            sum_w += w
-        n = len(pts)
-        cx, cy, mu, mw = sum_x / n, sum_y / n, sum_u / n, sum_w / n
-        num = den = 0.0
-        for x, y, u, w in pts:
-            qx, qy = x - cx, y - cy
-            num += qx * w - qy * u
-            den += qx * qx + qy * qy
-        wz = num / den if den > 1e-12 * n else 0.0
-        tx, ty = mu + wz * cy, mw - wz * cx
-        res = [(x, y, u - (tx - wz * y), w - (ty + wz * x)) for x, y, u, w in pts]
-        return (tx, ty, wz), res, (cx, cy), den
-
-    def _slip_min(self, positions, velocities):
-        twist, res, _, _ = self._fit(positions, velocities)
-        return np.array(twist), np.array([math.hypot(rx, ry) for _, _, rx, ry in res])
-
-    def _estimate(self, positions, velocities, estimator):
-        if estimator == "slip_min":
-            return self._slip_min(positions, velocities)
-        if estimator == "robust":
-            return self._robust(positions, velocities)
-        if estimator == "pinv":
-            C = self.constraint_matrix(positions)
-            twist = np.linalg.lstsq(C, velocities, rcond=None)[0]
-            fitted, res, _, _ = self._fit(positions, velocities)
-            # residual of pinv's twist: the slip_min residual minus the rigid
-            # field of the two twists' difference
-            dvx, dvy, dwz = (twist - np.array(fitted)).tolist()
-            return twist, np.array([math.hypot(rx - (dvx - dwz * y), ry - (dvy + dwz * x))
-                                    for x, y, rx, ry in res])
-        raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
-
-    def _robust(self, positions, velocities):
-        """slip_min, or the fit without the one caster that alone disagrees.
-
-        Leave-one-caster-out in closed form (regression deletion formulas on
-        the 2 rows of caster i): with the hat block ``H_ii = I/n + t t^T / D``
-        (``t = k x q_i``), the caster's disagreement with the rigid motion of
-        the others is ``d_i = (I - H_ii)^-1 r_i`` (r_i its residual in the full
-        fit), leaving it out lowers the residual energy by ``r_i . d_i``, and
-        moves the fit by ``-d_i / n`` (translation at the centroid) and
-        ``-(t . d_i) / D`` (rotation). Caster i* with the largest drop is
-        rejected when (a) the others then agree on a rigid motion (at most
-        ROBUST_CONCENTRATION of the energy left), (b) it explains more than any
-        other caster by ROBUST_UNIQUENESS^2 and (c) ``|d_i*|`` exceeds
-        ROBUST_OUTLIER_SLIP (a burst, not a gripping tyre's conflict slip).
-        Otherwise this is slip_min exactly. ``I - H_ii`` is singular with 2
-        casters (the other caster alone cannot fix a twist): no rejection.
-        """
-        (tx, ty, wz), res, (cx, cy), D = self._fit(positions, velocities)
-        n = len(res)
-        rss = sum(rx * rx + ry * ry for _, _, rx, ry in res)
-        a = 1.0 - 1.0 / n
-        drops = []
-        for x, y, rx, ry in res:
-            tqx, tqy = -(y - cy), x - cx
-            t2 = tqx * tqx + tqy * tqy
-            den = D * a - t2
-            if n < 3 or den <= 1e-9 * D:
-                drops.append(None)
-                continue
-            # (a I - t t^T / D)^-1 r = r / a + t (t . r) / (a den)   (Sherman-Morrison)
-            k = (tqx * rx + tqy * ry) / (a * den)
-            dx, dy = rx / a + k * tqx, ry / a + k * tqy
-            drops.append((rx * dx + ry * dy, dx, dy, tqx, tqy))
-        ranked = sorted((d[0], i) for i, d in enumerate(drops) if d is not None)
-        best = None
-        if len(ranked) >= 2 and rss > 0.0:
-            drop, i = ranked[-1]
-            second = ranked[-2][0]
-            _, dx, dy, tqx, tqy = drops[i]
-            if (rss - drop <= ROBUST_CONCENTRATION * rss
-                    and drop - second >= ROBUST_UNIQUENESS ** 2
-                    and math.hypot(dx, dy) > ROBUST_OUTLIER_SLIP):
-                best = (i, dx, dy, tqx, tqy)
-        if best is None:
-            return (np.array((tx, ty, wz)),
-                    np.array([math.hypot(rx, ry) for _, _, rx, ry in res]))
-        i, dx, dy, tqx, tqy = best
-        # centroid translation and rotation move by -d/n and -(t . d)/D
-        dwz = -(tqx * dx + tqy * dy) / D
-        dtx, dty = -dx / n + dwz * cy, -dy / n - dwz * cx    # at base_link's origin
-        residual = [math.hypot(rx - (dtx - dwz * y), ry - (dty + dwz * x))
-                    for x, y, rx, ry in res]
-        return np.array((tx + dtx, ty + dty, wz + dwz)), np.array(residual)
+        return estimate(self, np.asarray(positions, float), np.asarray(velocities, float),
+                        estimator)
 
     def jacobian(self, positions: np.ndarray) -> np.ndarray:
         """``C# = C_p^+ C_q^-1`` (3 x 2n): the slip-minimising estimator (eq. 13)."""
         positions = np.asarray(positions, float)
         return np.linalg.pinv(self.contact_jacobian(positions)) @ self.joint_to_contact(positions)
-
-    def torque_distribution(self, positions: np.ndarray, force: np.ndarray) -> np.ndarray:
-        """Joint torques ``Gamma' = C#^T F`` [N m] (eq. 14) that produce the
-        base wrench ``F = (fx [N], fy [N], tz [N m])`` in base_link while
-        minimising the contact forces in the least-squares sense.
-
-        Dual of ``slip_min``: power balance ``Gamma'.q_dot = F.x_dot`` with
-        ``q_dot = C x_dot`` gives ``C^T Gamma' = F``, which C#^T satisfies
-        because C# C = I.
-
-        Closed form (no pseudo-inverse per cycle): ``C_p^+T F`` is the
-        smallest set of contact forces f_i with sum f_i = (fx, fy) and
-        sum p_i x f_i = tz; Lagrange's conditions give f_i = (fx, fy)/n +
-        nu k x q_i about the contact centroid c (q_i = p_i - c) with
-        nu = (tz - c x (fx, fy)) / sum |q_i|^2. Then Gamma' = C_q^-T f:
-        steering torque b n_i . f_i, wheel torque r e_i . f_i.
-        """
-        fx, fy, tz = (float(v) for v in force)
-        phi = np.asarray(positions, float)[0::2]
-        c, s = np.cos(phi), np.sin(phi)
-        px, py = self.sx - self.b * c, self.sy - self.b * s
-        n = len(self.casters)
-        cx, cy = px.mean(), py.mean()
-        qx, qy = px - cx, py - cy
-        nu = (tz - (cx * fy - cy * fx)) / float((qx * qx + qy * qy).sum())
-        f_x, f_y = fx / n - nu * qy, fy / n + nu * qx
-        out = np.empty(2 * n)
-        out[0::2] = self.b * (-s * f_x + c * f_y)
-        out[1::2] = self.r * (c * f_x + s * f_y)
-        return out
 
     # -- configuration ------------------------------------------------------------
     @classmethod

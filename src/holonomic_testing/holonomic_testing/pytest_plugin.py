@@ -1,0 +1,55 @@
+"""Test-session set-up: a private ROS domain, localhost-only discovery, and
+fixtures to run the real stack (holonomic-bringup subprocesses) against an
+in-process probe node.
+
+The shared fixtures of every package's tests, in one place: a pytest plugin
+registered through the ``pytest11`` entry point (setup.py), so that
+``make test`` over all packages and ``colcon test --packages-select <pkg>``
+load the same set-up."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from holonomic_testing.ros_probe import Bringup, claim_domain_id, spin_in_thread
+
+
+def pytest_configure(config):
+    # Before anything imports rclpy; subprocesses inherit these.
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ["ROS_DOMAIN_ID"] = str(claim_domain_id())
+    os.environ.setdefault("ROS_LOG_DIR",
+                          str(Path(tempfile.gettempdir()) / "holonomic_test_ros_log"))
+
+
+@pytest.fixture(scope="session")
+def ros():
+    """rclpy initialised once for the session, with a probe node spun in a thread."""
+    import rclpy
+
+    rclpy.init()
+    node = rclpy.create_node("holonomic_test_probe")
+    stop = spin_in_thread(node)
+    yield node
+    stop()
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+@pytest.fixture
+def start_bringup(tmp_path):
+    """Factory: start holonomic-bringup with arguments; stopped at teardown."""
+    started: list[Bringup] = []
+
+    def start(*args: str) -> Bringup:
+        proc = Bringup(list(args), tmp_path / f"bringup_{len(started)}.log")
+        started.append(proc)
+        return proc
+
+    yield start
+    for proc in started:
+        proc.stop()
