@@ -22,6 +22,9 @@ from holonomic_sim.urdf import frictionless_links, generate_urdf
 
 #: [m] how high a lifted base (a bench test) is held above its resting height
 _LIFT = 0.1
+# the per-physics-step calls, looked up once (a drive-model step makes two)
+_set_motors, _joint_states, _TORQUE = (pb.setJointMotorControlArray, pb.getJointStates,
+                                       pb.TORQUE_CONTROL)
 
 
 class SimError(RuntimeError):
@@ -80,7 +83,7 @@ class SimRobot:
         self.model = model
         self.start = start
         self.lifted = lifted
-        cid = world.client
+        cid = self._client = world.client
         urdf = generate_urdf(model)
         with tempfile.TemporaryDirectory(prefix="holonomic_sim_") as tmp:
             path = os.path.join(tmp, f"{model.name}.urdf")
@@ -220,9 +223,9 @@ class SimRobot:
     def before_step(self) -> None:
         # TORQUE_CONTROL forces last one simulation step in pybullet.
         if self.drives is not None:
-            pb.setJointMotorControlArray(self.body, self.joint_indices, pb.TORQUE_CONTROL,
-                                         forces=self.drives.torques(self._drive_velocities),
-                                         physicsClientId=self.world.client)
+            _set_motors(self.body, self.joint_indices, _TORQUE,
+                        forces=self.drives.torques(self._drive_velocities),
+                        physicsClientId=self._client)
         elif self._torque_mode:
             pb.setJointMotorControlArray(self.body, self.joint_indices, pb.TORQUE_CONTROL,
                                          forces=self._efforts.tolist(),
@@ -233,10 +236,11 @@ class SimRobot:
             self._record_drive_states()
 
     def _record_drive_states(self) -> None:
-        states = pb.getJointStates(self.body, self.joint_indices,
-                                   physicsClientId=self.world.client)
+        # one read per physics step, kept whole: the loop needs the speeds
+        # now, the driver the (delayed) positions only at the control rate
+        states = _joint_states(self.body, self.joint_indices, physicsClientId=self._client)
         self._drive_velocities = [state[1] for state in states]
-        self.drives.record([state[0] for state in states], self._drive_velocities)
+        self.drives.record_states(states)
 
     # -- sensors ----------------------------------------------------------------
     def joint_states(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -245,7 +249,7 @@ class SimRobot:
         encoder counts)."""
         if self.drives is not None:
             positions, velocities = self.drives.feedback()
-            return positions, velocities, self.drives.torque.copy()
+            return positions, velocities, self.drives.torque
         states = pb.getJointStates(self.body, self.joint_indices,
                                    physicsClientId=self.world.client)
         columns = list(zip(*states))
