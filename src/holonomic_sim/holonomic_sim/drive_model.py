@@ -11,17 +11,18 @@ returns and feeds back the joint states. Per joint:
   the loop is sub-stepped inside the step against the joint's own inertia
   (``v += tau h / J``, the drive's view between two physics updates); the
   step then receives the mean torque. Gains from the configured closed-loop
-  bandwidth ``f_bw`` and the inertia ``J`` the joint drives with the base held
-  still and its wheels off the floor (the joint's links plus the rotor):
+  bandwidth ``f_bw`` and the inertia ``J`` the drive was tuned on (by default
+  the robot on the floor: the joint's links and rotor plus its share of the
+  base's mass and yaw inertia, ``world.SimRobot.loaded_inertia``):
   ``Kp = J w_c``, ``Ki = Kp w_c r_i`` (``Kp`` in its sampled-exact form, see
   the code), with ``w_c`` such that the closed loop
   ``T(s) = w_c (s + r_i w_c) / (s^2 + w_c s + r_i w_c^2)`` has its -3 dB
   point at ``f_bw`` (:func:`crossover`). With ``r_i`` small this is nearly a
   first-order loop of bandwidth ``f_bw`` (10-90 % rise time close to
   ``ln 9 / (2 pi f_bw)``) whose integrator removes the steady-state error
-  left by friction. On the floor the joint also moves
-  the base, so the same gains give a slower loop -- as on a real robot whose
-  drive was tuned on the bench.
+  left by friction. Off the floor (lifted) such a loop
+  drives a smaller inertia and is faster; gains tuned lifted
+  (``tuned_on="lifted"``) give a loop 5-20 times slower on the floor.
 * **torque limit** (the drive's current limit times its torque constant and
   gear ratio): ``|tau| <= tau_max``; the integrator stops winding up while
   the output is saturated (conditional integration).
@@ -58,8 +59,10 @@ import numpy as np
 class DriveSpec:
     """Nominal drive parameters of a robot's joints (arrays in joint order).
 
-    ``bandwidth`` [Hz]: closed-loop velocity bandwidth with the base held and
-    the wheels off the floor; ``integral_ratio`` [-]: integrator corner over
+    ``bandwidth`` [Hz]: closed-loop velocity bandwidth on the inertia the
+    gains are designed for (``tuned_on``: "floor", the robot on its wheels,
+    or "lifted", the joint alone with the base held; the physics owner
+    computes that inertia); ``integral_ratio`` [-]: integrator corner over
     bandwidth; ``loop_rate`` [Hz]; ``torque_limit`` [N m]; ``coulomb`` [N m];
     ``viscous`` [N m s/rad]; ``gear_ratio`` [-] (motor turns per joint turn);
     ``rotor_inertia`` [kg m^2] (motor side); ``encoder_counts`` [counts per
@@ -78,6 +81,7 @@ class DriveSpec:
     command_delay: float
     feedback_delay: float
     spread: float
+    tuned_on: str = "floor"
 
     @property
     def reflected_inertia(self) -> np.ndarray:
@@ -103,9 +107,8 @@ def crossover(bandwidth: float, integral_ratio: float) -> float:
 class DriveBank:
     """The drives of one robot's joints, advanced once per physics step.
 
-    ``inertia`` [kg m^2]: each joint's inertia with the base held still and the
-    other joints locked (rotor included), the plant the gains are designed
-    for; ``physics_dt`` [s]; ``rng`` draws the per-joint spread.
+    ``inertia`` [kg m^2]: each joint's inertia where the drives were tuned
+    (rotor included), the plant the gains are designed for; ``physics_dt`` [s]; ``rng`` draws the per-joint spread.
 
     Use: :meth:`command_velocities` / :meth:`command_efforts` at the control
     rate; per physics step :meth:`torques` (joint speeds now -> torques to
