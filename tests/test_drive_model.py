@@ -154,12 +154,14 @@ def test_simulated_step_response_rises_as_the_configured_bandwidth(capsys, robot
                                          ("hamr", "left_wheel_joint")])
 def test_drives_tuned_on_the_floor_have_the_configured_bandwidth_on_the_floor(capsys, robot,
                                                                               joint):
-    """The default drives (sim.drive.tuned_on: floor), the robot on its wheels
-    in a straight run: the loop drives its share of the base and rises within
-    20 % of ln 9 / (2 pi 40 Hz) = 8.74 ms (measured 9.4 ms xr4000, 8.6 ms hamr
-    at 0.5 rad/s). Gains tuned lifted give a loop ~12x slower there (measured
-    127 ms and 105 ms: the ~2 Hz loop of a bench-tuned drive on the floor)."""
-    floor = run_drive_test(capsys, robot, "--joint", joint, "--amplitude", "0.5", "--on-floor")
+    """Drives tuned on the floor (sim.drive.tuned_on: floor), the robot on its
+    wheels in a straight run: the loop drives its share of the base and rises
+    within 20 % of ln 9 / (2 pi 40 Hz) = 8.74 ms (measured 9.4 ms xr4000,
+    8.6 ms hamr at 0.5 rad/s). The default gains, tuned lifted, give a loop
+    ~12x slower there (measured 127 ms and 105 ms: the ~2 Hz loop of a
+    bench-tuned drive on the floor)."""
+    floor = run_drive_test(capsys, robot, "--joint", joint, "--amplitude", "0.5", "--on-floor",
+                           "-p", "sim.drive.tuned_on:=floor")
     assert floor["on_floor"] is True and floor["tuned_on"] == "floor"
     assert floor["torque_saturated"] is False
     assert floor["rise_time_s"] == pytest.approx(DEFAULT_RISE, rel=0.2)
@@ -238,9 +240,9 @@ def test_sim_driver_reads_whole_encoder_counts_and_ideal_motors_read_raw():
 
 
 def test_lifted_base_stays_in_the_air_while_its_wheels_turn():
-    # drives tuned lifted: tuned on the floor, a lifted wheel's loop (22x less
-    # inertia) rings at the torque limit in 1 ms physics steps, as a real
-    # drive tuned on the floor may in the air (docs/drive_model.md)
+    # drives tuned lifted (the default): tuned on the floor, a lifted wheel's
+    # loop (22x less inertia) chatters at its torque limit in 1 ms physics
+    # steps (docs/drive_model.md)
     cfg = load_config("hamr", {"sim.lifted": True, "sim.drive.tuned_on": "lifted"})
     with SimDriver(cfg.model, cfg.values, 200.0) as driver:
         driver.activate()

@@ -12,7 +12,7 @@ returns and feeds back the joint states. Per joint:
   (``v += tau h / J``, the drive's view between two physics updates); the
   step then receives the mean torque. Gains from the configured closed-loop
   bandwidth ``f_bw`` and the inertia ``J`` the drive was tuned on (by default
-  the robot on the floor: the joint's links and rotor plus its share of the
+  lifted: the joint's links and rotor; or on the floor, plus its share of the
   base's mass and yaw inertia, ``world.SimRobot.loaded_inertia``):
   ``Kp = J w_c``, ``Ki = Kp w_c r_i`` (``Kp`` in its sampled-exact form, see
   the code), with ``w_c`` such that the closed loop
@@ -20,9 +20,10 @@ returns and feeds back the joint states. Per joint:
   point at ``f_bw`` (:func:`crossover`). With ``r_i`` small this is nearly a
   first-order loop of bandwidth ``f_bw`` (10-90 % rise time close to
   ``ln 9 / (2 pi f_bw)``) whose integrator removes the steady-state error
-  left by friction. Off the floor (lifted) such a loop
-  drives a smaller inertia and is faster; gains tuned lifted
-  (``tuned_on="lifted"``) give a loop 5-20 times slower on the floor.
+  left by friction. Gains tuned lifted give a loop 5-20
+  times slower on the floor; gains tuned on the floor (``tuned_on="floor"``)
+  a loop 5-20 times faster on a lifted or slipping wheel, which at a 1 ms
+  physics step (``Kp h / J > 2``) is unstable.
 * **torque limit** (the drive's current limit times its torque constant and
   gear ratio): ``|tau| <= tau_max``; the integrator stops winding up while
   the output is saturated (conditional integration).
@@ -81,7 +82,7 @@ class DriveSpec:
     command_delay: float
     feedback_delay: float
     spread: float
-    tuned_on: str = "floor"
+    tuned_on: str = "lifted"
 
     @property
     def reflected_inertia(self) -> np.ndarray:

@@ -312,13 +312,16 @@ def drive_specs() -> list[ParamSpec]:
                   default=40.0, minimum=0.1, maximum=500.0),
         ParamSpec("sim.drive.tuned_on", "string",
                   "Where the velocity loops were tuned, i.e. which inertia J the gains are "
-                  "designed for: 'floor' (default: the robot standing on its wheels, the "
-                  "base's mass and yaw inertia reflected to each joint through the wheel "
-                  "radii, caster offsets and gears, as drives are tuned on a real base; "
-                  "sim.drive.bandwidth is then the loaded bandwidth, and a lifted joint's "
-                  "loop is faster, possibly ringing) or 'lifted' (the joint alone, base held: "
-                  "a bench tuning, whose loops on the floor are 5-20x slower).",
-                  default="floor", choices=("floor", "lifted")),
+                  "designed for. 'lifted' (default): the joint alone, base held (a bench "
+                  "tuning); on the floor, where each wheel also moves its share of the base "
+                  "(5-20x the inertia), these loops are ~2 Hz. 'floor': the robot on its "
+                  "wheels, the base's mass and yaw inertia reflected to each joint through the "
+                  "wheel radii, caster offsets and gears, as drives are tuned on a real base; "
+                  "sim.drive.bandwidth is then the loaded bandwidth. Not the default: at the "
+                  "1 ms physics step such a loop is unstable on a wheel that unloads (lifted, "
+                  "or slipping: Kp h / J is ~5 > 2) and chatters at its torque limit "
+                  "(docs/drive_model.md).",
+                  default="lifted", choices=("floor", "lifted")),
         ParamSpec("sim.drive.integral_ratio", "double",
                   "Integrator corner of the velocity PI over its bandwidth [-]: "
                   "Ki = Kp 2 pi f r. Default 0.05: the integrator removes the friction's "
