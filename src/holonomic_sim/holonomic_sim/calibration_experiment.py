@@ -39,13 +39,9 @@ FAULTS = {
 #: loops impose the configured kinematics on the joints and the floor takes
 #: the conflict as slip, so the joints alone cannot show the error); the
 #: DDROT has no conflict to hide (three joints, three degrees of freedom)
-# Ideal motors: the targets below are met there. On the simulator's drive
-# model (its default) they are not yet: a 30 s HAMR drive leaves the radii
-# 0.18 % off, and the XR4000's first torque-mode pass can return casters too
-# unlike for the torque-mode dynamic model of the second (measured at merge,
-# 2026-11-26) -- open work.
-CALIBRATION_DRIVE = {"pcv": {"control_mode": "torque", "sim.ideal_motors": True},
-                     "ddrot": {"sim.ideal_motors": True}}
+# On the simulator's default drive model (its readings feedback_delay old:
+# the reference is taken at the instant they were sampled, truth_at_samples).
+CALIBRATION_DRIVE = {"pcv": {"control_mode": "torque"}, "ddrot": {}}
 #: the issue's targets: relative error of lengths, absolute error of zeros [rad]
 TARGETS = {("pcv", "radius"): 0.002, ("pcv", "offset"): 0.02, ("pcv", "zero"): math.radians(0.2),
            ("ddrot", "radius"): 0.003, ("ddrot", "length"): 0.003,
