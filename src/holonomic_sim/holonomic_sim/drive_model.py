@@ -207,32 +207,16 @@ class DriveBank:
         self._step += 1
         if self._torque_mode:
             tau = self._target
-            self._torque = tau
-            return [t - b * v for t, b, v in zip(tau, self._viscous, velocities)]
-        if self.substeps > 1:
-            return self._substepped(velocities)
-        # one PI cycle per joint (see _pi), the viscous drag folded in
-        integral = self._integral
-        tau = [0.0] * self.n
-        out = [0.0] * self.n
-        i = 0
-        for (kp, ki_h, limit, viscous, _), target, v in zip(self._params, self._target,
-                                                             velocities):
-            error = target - v
-            new = integral[i] + ki_h * error
-            raw = kp * error + new
-            t = limit if raw > limit else (-limit if raw < -limit else raw)
-            if t == raw or (error > 0.0) != (raw > 0.0):
-                integral[i] = new
-            tau[i] = t
-            out[i] = t - viscous * v
-            i += 1
+        elif self.substeps > 1:
+            tau = self._substepped(velocities)
+        else:
+            tau = self._pi(velocities)
         self._torque = tau
-        return out
+        return [t - b * v for t, b, v in zip(tau, self._viscous, velocities)]
 
     def _substepped(self, velocities) -> list[float]:
         """The loop run ``substeps`` times inside the physics step against each
-        joint's own inertia (``v += (tau - b v) h / J``); the mean torque."""
+        joint's own inertia (``v += (tau - b v) h / J``); the mean motor torque [N m]."""
         v = list(velocities)
         total = [0.0] * self.n
         for _ in range(self.substeps):
@@ -240,9 +224,7 @@ class DriveBank:
             for i, (_, _, _, viscous, h_over_j) in enumerate(self._params):
                 v[i] += (tau[i] - viscous * v[i]) * h_over_j
                 total[i] += tau[i]
-        tau = [t / self.substeps for t in total]
-        self._torque = tau
-        return [t - b * w for t, b, w in zip(tau, self._viscous, velocities)]
+        return [t / self.substeps for t in total]
 
     def _pi(self, velocities) -> list[float]:
         """One loop cycle: PI on ``target - velocities`` with conditional
