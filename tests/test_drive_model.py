@@ -265,3 +265,38 @@ def test_internal_force_is_the_part_of_the_contact_forces_that_moves_nothing():
     # a mix: forward 2 N on one wheel only = 1 N each forward (net force) plus
     # +-1 N along x (internal) plus a moment-free remainder: internal (1, 0), (-1, 0)
     assert internal_force(at, [[2.0, 0.0], [0.0, 0.0]]) == pytest.approx(apart)
+
+
+def test_floor_tuned_gains_carry_each_wheels_share_of_the_base():
+    """XR4000 on the floor: in a straight run each of the four wheels pushes a
+    quarter of the robot, J_w + m r^2 / 4 (m from pybullet's links, r 55 mm);
+    the fit over forward / sideways / turning mixes in the turning share
+    (measured 0.0494 against 0.0514 kg m^2). The HAMR turret on the floor
+    turns the top against the drive base standing on its wheels, not the
+    drive base alone as when lifted (0.72 kg m^2): measured 0.13 kg m^2."""
+    import pybullet as pb
+
+    from holonomic_sim.sim_driver import drive_spec
+    from holonomic_sim.world import Pose2D, SimWorld
+
+    world = SimWorld()
+    try:
+        cfg = load_config("xr4000", {"sim.drive.tuned_on": "floor"})
+        robot = world.add_robot(cfg.model, drive=drive_spec(cfg.model, cfg.values))
+        mass = sum(pb.getDynamicsInfo(robot.body, link, physicsClientId=world.client)[0]
+                   for link in range(-1, pb.getNumJoints(robot.body,
+                                                         physicsClientId=world.client)))
+        wheels = [i for i, n in enumerate(cfg.model.joint_names) if n.endswith("wheel_joint")]
+        lifted = load_config("xr4000")
+        bench = world.add_robot(lifted.model, drive=drive_spec(lifted.model, lifted.values),
+                                start=Pose2D(5.0, 0.0, 0.0))
+        own = bench.drives.inertia[wheels]
+        share = own + mass * 0.055 ** 2 / 4
+        assert robot.drives.inertia[wheels] == pytest.approx(share, rel=0.1)
+        hamr = load_config("hamr", {"sim.drive.tuned_on": "floor"})
+        top = world.add_robot(hamr.model, drive=drive_spec(hamr.model, hamr.values),
+                              start=Pose2D(-5.0, 0.0, 0.0))
+        turret = hamr.model.joint_names.index("turret_joint")
+        assert top.drives.inertia[turret] < 0.5 * 0.72
+    finally:
+        world.close()
