@@ -98,7 +98,9 @@ def floor_step(model, positions, index: int, amplitude: float) -> np.ndarray:
     if rank >= 2:
         raise ValueError("no straight run leaves the steering joints still at this pose "
                          "(align the casters first)")
-    direction = vt[-1]
+    # a one-dimensional null space is the run; with no steering constraint
+    # (rank 0) the run is the one that turns this wheel fastest
+    direction = vt[-1] if rank == 1 else rows[index] / max(np.linalg.norm(rows[index]), 1e-12)
     rate = float(rows[index] @ direction)
     if abs(rate) < 1e-9:
         raise ValueError(f"{names[index]} does not turn on a straight run at this pose")
