@@ -35,6 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from holonomic_core import hot_path
+
 
 def wrap_angle(angle: float) -> float:
     """Angle wrapped to [-pi, pi] [rad]."""
@@ -115,6 +117,15 @@ class Odometry:
         self.estimator = estimator
         self.noise = noise or OdometryNoise()
         self.twist_window = float(twist_window)
+        # the compiled increment (hot_path) where the kinematics have one for
+        # this estimator; None: the pure-Python arithmetic below
+        hot = hot_path.module()
+        self._hot = hot
+        self._kernel = model.kinematics.hot_path_geometry(estimator) if hot is not None else None
+        n = self.noise
+        self._noise_terms = np.array([n.linear_variance_per_meter, n.angular_variance_per_radian,
+                                      n.angular_variance_per_meter, n.slip_position_gain,
+                                      n.slip_heading_gain], dtype=float)
         self.reset()
 
     def reset(self, pose=(0.0, 0.0, 0.0)) -> None:
@@ -178,9 +189,31 @@ class Odometry:
             self._history.clear()
             self._history.append((stamp, self._last_positions, self.twist))
             return False
+        dt = stamp - self._last_stamp
+        if dt > 0.0 and self._kernel is not None:
+            # compiled: the arithmetic of the branch below and of _integrate, one call
+            kind, geometry = self._kernel
+            (self.rate_twist, self.residual, disp, self.slip, self._P,
+             dist) = self._hot.odometry_step(kind, geometry, self._last_positions, positions,
+                                             dt, self.pose, self._P, self._noise_terms)
+            self.distance += dist
+        else:
+            disp = self._increment(positions, dt)
+        self._last_positions = np.array(positions, dtype=float)
+        self._last_stamp = stamp
+        if dt > 0.0:
+            self._update_twist(disp, dt)
+        elif dt < 0.0:
+            # the clock went back: the window's stamps mean nothing any more
+            self._history.clear()
+            self._history.append((stamp, self._last_positions, self.twist))
+        return True
+
+    def _increment(self, positions: np.ndarray, dt: float) -> np.ndarray:
+        """The pure-Python increment: estimate, then compose; returns the
+        body displacement (dx, dy, dtheta) [m, m, rad]."""
         dq = positions - self._last_positions
         mid = self._last_positions + 0.5 * dq
-        dt = stamp - self._last_stamp
         slip2_dt = 0.0
         if dt > 0.0:
             # Fit the mean rates, not the displacement: slip_min and pinv are
@@ -197,15 +230,7 @@ class Odometry:
             # a repeated or backward stamp: no rate, but the motion is real
             disp = self.model.kinematics.forward(mid, dq, self.estimator)
         self._integrate(disp, slip2_dt)
-        self._last_positions = np.array(positions, dtype=float)
-        self._last_stamp = stamp
-        if dt > 0.0:
-            self._update_twist(disp, dt)
-        elif dt < 0.0:
-            # the clock went back: the window's stamps mean nothing any more
-            self._history.clear()
-            self._history.append((stamp, self._last_positions, self.twist))
-        return True
+        return disp
 
     def _update_twist(self, disp: np.ndarray, dt: float) -> None:
         """Line fit through the readings of the last ``twist_window`` s."""

@@ -87,6 +87,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from holonomic_core import hot_path
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics
 from holonomic_core.schema import ConfigError, ParamSpec, number_or_none
 
@@ -189,6 +190,9 @@ class PoweredCasterKinematics(BaseKinematics):
         # the same work as a dozen numpy calls on length-n arrays.
         self._geometry = tuple((float(c.axis[0]), float(c.axis[1]), float(c.caster_offset),
                                 float(c.wheel_radius)) for c in casters)
+        #: the compiled closed forms (hot_path), None for the pure-Python path
+        self._hot = hot_path.module()
+        self._hot_geometry = np.array(self._geometry, dtype=float).ravel()
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -269,6 +273,8 @@ class PoweredCasterKinematics(BaseKinematics):
         swerve module): phi_dot = n . v(s) / b - wz, rho_dot = e . v(s) / r,
         with v(s) the base's velocity at the steering axis.
         """
+        if self._hot is not None:
+            return self._hot.inverse(hot_path.KIND_PCV, positions, twist, self._hot_geometry)
         q = positions.tolist() if isinstance(positions, np.ndarray) else list(positions)
         vx, vy, wz = float(twist[0]), float(twist[1]), float(twist[2])
         out = []
@@ -298,8 +304,15 @@ class PoweredCasterKinematics(BaseKinematics):
     def estimate(self, positions: np.ndarray, velocities: np.ndarray,
                  estimator: str = "slip_min") -> tuple[np.ndarray, np.ndarray]:
         """Twist and per-caster residual from one fit (see BaseKinematics)."""
+        if self._hot is not None and estimator == "slip_min":
+            return self._hot.estimate(hot_path.KIND_PCV, positions, velocities,
+                                      self._hot_geometry)
         return self._estimate(np.asarray(positions, float), np.asarray(velocities, float),
                               estimator)
+
+    def hot_path_geometry(self, estimator: str = "slip_min") -> tuple[int, np.ndarray] | None:
+        """The compiled form covers the slip_min fit (robust and pinv stay in Python)."""
+        return (hot_path.KIND_PCV, self._hot_geometry) if estimator == "slip_min" else None
 
     def _fit(self, positions, velocities):
         """The slip_min fit in scalar math, with what the robust test needs.
