@@ -590,6 +590,162 @@ done:
     return out;
 }
 
+/* Reads entry `i` of the twist window's history: (stamp, positions, twist). */
+static int
+history_entry(PyObject *entry, npy_intp nq, double *stamp, const double **q, const double **tw)
+{
+    if (!PyTuple_Check(entry) || PyTuple_GET_SIZE(entry) != 3) {
+        PyErr_SetString(PyExc_TypeError, "history: (stamp, positions, twist) tuples");
+        return -1;
+    }
+    *stamp = PyFloat_AsDouble(PyTuple_GET_ITEM(entry, 0));
+    if (*stamp == -1.0 && PyErr_Occurred())
+        return -1;
+    PyObject *qo = PyTuple_GET_ITEM(entry, 1), *to = PyTuple_GET_ITEM(entry, 2);
+    if (!PyArray_Check(qo) || !PyArray_Check(to)
+            || PyArray_TYPE((PyArrayObject *)qo) != NPY_DOUBLE
+            || PyArray_TYPE((PyArrayObject *)to) != NPY_DOUBLE
+            || !PyArray_ISCARRAY_RO((PyArrayObject *)qo) || !PyArray_ISCARRAY_RO((PyArrayObject *)to)
+            || PyArray_SIZE((PyArrayObject *)qo) != nq || PyArray_SIZE((PyArrayObject *)to) != 3) {
+        PyErr_SetString(PyExc_TypeError, "history: float64 positions and twist arrays");
+        return -1;
+    }
+    *q = PyArray_DATA((PyArrayObject *)qo);
+    *tw = PyArray_DATA((PyArrayObject *)to);
+    return 0;
+}
+
+/* twist_update(kind, geometry, history, stamp, positions, disp, dt, terms,
+   rho2, lag) -> (twist, twist_variance)
+
+   Mirrors Odometry._update_twist after the window's old readings were
+   dropped: `history` holds the readings in the window before this one
+   (stamp [s], positions [rad], twist); with one, the twist is disp / dt,
+   else the least-squares line through the readings' positions over their
+   stamps gives the mean rates, mapped through the estimate at the mean
+   configuration. terms = (twist_variance[3], twist_slip_gain[3],
+   twist_lag_gain[3]); rho2 [(m/s)^2] the squared slip; lag [s]. numpy
+   sums the means and the line fit in its own order (pairwise, BLAS): the
+   windowed twist agrees with the pure path to a few ulp, the two-reading
+   twist bitwise. */
+static PyObject *
+twist_update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (check_nargs(nargs, 10, "twist_update") < 0)
+        return NULL;
+    long kind = PyLong_AsLong(args[0]);
+    if (kind == -1 && PyErr_Occurred())
+        return NULL;
+    double stamp = PyFloat_AsDouble(args[3]);
+    if (stamp == -1.0 && PyErr_Occurred())
+        return NULL;
+    double dt = PyFloat_AsDouble(args[6]);
+    if (dt == -1.0 && PyErr_Occurred())
+        return NULL;
+    double rho2 = PyFloat_AsDouble(args[8]);
+    if (rho2 == -1.0 && PyErr_Occurred())
+        return NULL;
+    double lag = PyFloat_AsDouble(args[9]);
+    if (lag == -1.0 && PyErr_Occurred())
+        return NULL;
+    PyArrayObject *g_a = NULL, *q_a = NULL, *d_a = NULL, *t_a = NULL;
+    PyObject *seq = NULL, *out = NULL, *tw_o = NULL;
+    double qm[2 * MAX_CASTERS], rates[2 * MAX_CASTERS], res[MAX_CASTERS];
+    double scratch[4 * MAX_CASTERS], *twist;
+    g_a = as_vector(args[1], "geometry");
+    if (g_a == NULL)
+        goto done;
+    q_a = as_vector(args[4], "positions");
+    if (q_a == NULL)
+        goto done;
+    d_a = as_vector(args[5], "disp");
+    if (d_a == NULL || need_length(d_a, 3, "disp") < 0)
+        goto done;
+    t_a = as_vector(args[7], "terms");
+    if (t_a == NULL || need_length(t_a, 9, "terms") < 0)
+        goto done;
+    seq = PySequence_Fast(args[2], "history: a sequence");
+    if (seq == NULL)
+        goto done;
+    npy_intp m = PySequence_Fast_GET_SIZE(seq), nq = PyArray_DIM(q_a, 0);
+    if (m < 1 || nq > 2 * MAX_CASTERS) {
+        PyErr_SetString(PyExc_ValueError, "history: at least one reading; at most 128 joints");
+        goto done;
+    }
+    double t0;
+    const double *q0, *twist0;
+    if (history_entry(PySequence_Fast_GET_ITEM(seq, 0), nq, &t0, &q0, &twist0) < 0)
+        goto done;
+    tw_o = new_vector(3, &twist);
+    if (tw_o == NULL)
+        goto done;
+    const double *disp = PyArray_DATA(d_a), *positions = PyArray_DATA(q_a);
+    if (m == 1) {
+        for (int i = 0; i < 3; i++)
+            twist[i] = disp[i] / dt;         /* the line through two readings */
+    } else {
+        /* t = stamps + [stamp]; tc = t - mean(t); qm = mean of the rows;
+           rates = tc @ (q - qm) / (tc @ tc) */
+        npy_intp rows = m + 1;
+        double tsum = 0.0, tmean, tt = 0.0, ts;
+        const double *qi, *twi;
+        for (npy_intp k = 0; k < m; k++) {
+            if (history_entry(PySequence_Fast_GET_ITEM(seq, k), nq, &ts, &qi, &twi) < 0)
+                goto done;
+            tsum += ts;
+        }
+        tsum += stamp;
+        tmean = tsum / (double)rows;
+        for (npy_intp j = 0; j < nq; j++) {
+            qm[j] = 0.0;
+            rates[j] = 0.0;
+        }
+        for (npy_intp k = 0; k < rows; k++) {
+            if (k < m)
+                history_entry(PySequence_Fast_GET_ITEM(seq, k), nq, &ts, &qi, &twi);
+            else
+                qi = positions;
+            for (npy_intp j = 0; j < nq; j++)
+                qm[j] += qi[j];
+        }
+        for (npy_intp j = 0; j < nq; j++)
+            qm[j] /= (double)rows;
+        for (npy_intp k = 0; k < rows; k++) {
+            if (k < m) {
+                history_entry(PySequence_Fast_GET_ITEM(seq, k), nq, &ts, &qi, &twi);
+            } else {
+                ts = stamp;
+                qi = positions;
+            }
+            double tc = ts - tmean;
+            tt += tc * tc;
+            for (npy_intp j = 0; j < nq; j++)
+                rates[j] += tc * (qi[j] - qm[j]);
+        }
+        for (npy_intp j = 0; j < nq; j++)
+            rates[j] /= tt;
+        if (estimate_into(kind, qm, nq, rates, PyArray_DATA(g_a), PyArray_DIM(g_a, 0),
+                          twist, res, scratch) < 0)
+            goto done;
+    }
+    /* acceleration over the window, for the lag term of the covariance */
+    const double *terms = PyArray_DATA(t_a);
+    double var[3];
+    for (int i = 0; i < 3; i++) {
+        double a = (twist[i] - twist0[i]) / (stamp - t0);
+        var[i] = terms[i] + terms[3 + i] * rho2 + terms[6 + i] * pow(a * lag, 2.0);
+    }
+    out = Py_BuildValue("(O(ddd))", tw_o, var[0], var[1], var[2]);
+done:
+    Py_XDECREF(g_a);
+    Py_XDECREF(q_a);
+    Py_XDECREF(d_a);
+    Py_XDECREF(t_a);
+    Py_XDECREF(seq);
+    Py_XDECREF(tw_o);
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"limit_twist", (PyCFunction)(void (*)(void))limit_twist, METH_FASTCALL,
      "limit_twist(target, previous, dt, limits) -> twist: TwistLimiter.limit."},
@@ -604,6 +760,9 @@ static PyMethodDef methods[] = {
     {"odometry_step", (PyCFunction)(void (*)(void))odometry_step, METH_FASTCALL,
      "odometry_step(kind, geometry, last, positions, dt, pose, covariance, noise) -> "
      "(rate_twist, residual, disp, slip, covariance, distance)."},
+    {"twist_update", (PyCFunction)(void (*)(void))twist_update, METH_FASTCALL,
+     "twist_update(kind, geometry, history, stamp, positions, disp, dt, terms, rho2, lag) -> "
+     "(twist, twist_variance)."},
     {NULL, NULL, 0, NULL},
 };
 

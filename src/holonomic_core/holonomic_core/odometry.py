@@ -126,6 +126,8 @@ class Odometry:
         self._noise_terms = np.array([n.linear_variance_per_meter, n.angular_variance_per_radian,
                                       n.angular_variance_per_meter, n.slip_position_gain,
                                       n.slip_heading_gain], dtype=float)
+        self._twist_terms = np.array(tuple(n.twist_variance) + tuple(n.twist_slip_gain)
+                                     + tuple(n.twist_lag_gain), dtype=float)
         self.reset()
 
     def reset(self, pose=(0.0, 0.0, 0.0)) -> None:
@@ -239,6 +241,15 @@ class Odometry:
         # the readings within the window before this one, at least the last
         while len(history) > 1 and stamp - history[0][0] > self.twist_window + 1e-9:
             history.popleft()
+        if self._kernel is not None:
+            # compiled: the fit, the acceleration and the variances below, one call
+            kind, geometry = self._kernel
+            twist, self._twist_var = self._hot.twist_update(
+                kind, geometry, history, stamp, positions, disp, dt, self._twist_terms,
+                self.slip * self.slip, 0.5 * self.twist_window)
+            history.append((stamp, positions, twist))
+            self.twist = twist
+            return
         if len(history) == 1:
             twist = disp / dt          # the line through two readings
         else:
