@@ -36,7 +36,7 @@ from holonomic_core.driver import (DRIVER_REGISTRY, Driver, DriverError, DriverF
                                    DriverState, JointReading, driver_class,
                                    sim_drives_driver)
 from holonomic_core.kinematics import ESTIMATORS
-from holonomic_core.limits import TwistLimiter, is_finite_twist, saturate_joint_rates
+from holonomic_core.limits import TwistLimiter, is_finite_twist, joint_rate_saturation
 from holonomic_core.model import (RobotModel, build_model, check_no_unknown, read_params_file,
                                   resolve_config)
 from holonomic_core.monitor import MonitorLimits, ReadingMonitor
@@ -326,6 +326,8 @@ class BaseController:
                                       self.dt, c.monitor)
         self._clock = clock
         self._max_rates = self.model.max_joint_velocity
+        # compiled or pure, as the limiter, kinematics and odometry (hot_path)
+        self._saturate = joint_rate_saturation()
         corrections = self.model.zero_corrections
         self._zero_corrections = corrections if corrections.any() else None
         #: the calibration drift watch (None where it does not apply)
@@ -471,7 +473,7 @@ class BaseController:
             target = np.asarray(sample[1], float) + pull
         twist = self.limiter.limit(target, self.twist_command, self.dt)
         rates = self.model.kinematics.inverse(reading.positions, twist)
-        rates, scale = saturate_joint_rates(rates, self._max_rates)
+        rates, scale = self._saturate(rates, self._max_rates)
         try:
             if self.torque is None:
                 self.driver.write_velocities(rates)

@@ -118,12 +118,17 @@ def saturate_joint_rates_pure(rates: np.ndarray,
     return rates * scale, scale
 
 
-_HOT = hot_path.module()
-#: :func:`saturate_joint_rates_pure`, compiled when :mod:`holonomic_core.hot_path`
-#: selects it at import (bound directly: a wrapper's call would cost as much
-#: as the compiled arithmetic)
-saturate_joint_rates = (_HOT.saturate_joint_rates if _HOT is not None
-                        else saturate_joint_rates_pure)
+def joint_rate_saturation():
+    """:func:`saturate_joint_rates_pure` or its compiled twin, as
+    :mod:`holonomic_core.hot_path` selects now (a cycle object takes it once,
+    when it is built: a dispatching wrapper's call would cost as much as the
+    compiled arithmetic)."""
+    hot = hot_path.module()
+    return saturate_joint_rates_pure if hot is None else hot.saturate_joint_rates
+
+
+#: the saturation selected when this module was imported
+saturate_joint_rates = joint_rate_saturation()
 
 
 def is_finite_twist(twist) -> bool:
