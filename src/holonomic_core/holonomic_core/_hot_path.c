@@ -26,6 +26,7 @@
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
 #include <math.h>
+#include <string.h>
 
 #define TWO_PI (2.0 * 3.141592653589793)
 
@@ -498,10 +499,12 @@ done:
 }
 
 /* odometry_step(kind, geometry, last_positions, positions, dt, pose,
-   covariance, noise) -> (rate_twist, residual, disp, slip, covariance, distance)
+   covariance, noise) -> (rate_twist, residual, disp, slip, covariance,
+   distance, positions as a new float64 array), or None when a position is
+   not finite (nothing changes: Odometry.update skips such a reading)
 
    One encoder increment with dt > 0, all of Odometry.update's arithmetic
-   between its checks and the twist window: dq, the mid-point configuration,
+   before the twist window: the finiteness check, dq, the mid-point configuration,
    the mean rates dq / dt, the estimate (rate twist, residual), disp = rate
    twist x dt, slip = RMS residual, the arc and the covariance (pose updated
    in place). */
@@ -517,7 +520,7 @@ odometry_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (dt == -1.0 && PyErr_Occurred())
         return NULL;
     PyArrayObject *pose, *g_a = NULL, *l_a = NULL, *q_a = NULL, *n_a = NULL;
-    PyObject *out = NULL, *tw_o = NULL, *res_o = NULL, *disp_o = NULL;
+    PyObject *out = NULL, *tw_o = NULL, *res_o = NULL, *disp_o = NULL, *copy_o = NULL;
     double P[6], mid[2 * MAX_CASTERS], rates[2 * MAX_CASTERS], tw[3], res[MAX_CASTERS];
     double scratch[4 * MAX_CASTERS], *o, *disp;
     if (writable_pose(args[5], &pose) < 0 || read_covariance(args[6], P) < 0)
@@ -542,6 +545,19 @@ odometry_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (need_length(l_a, nq, "last_positions") < 0)
         goto done;
     const double *last = PyArray_DATA(l_a), *q = PyArray_DATA(q_a);
+    /* the pure path tests isfinite(sum(positions)): any NaN or +-inf (a sum
+       of finite positions overflowing, |q| ~ 1e308 rad, is not mirrored) */
+    for (npy_intp i = 0; i < nq; i++) {
+        if (!isfinite(q[i])) {
+            out = Py_None;
+            Py_INCREF(out);
+            goto done;
+        }
+    }
+    copy_o = new_vector(nq, &o);
+    if (copy_o == NULL)
+        goto done;
+    memcpy(o, q, nq * sizeof(double));
     for (npy_intp i = 0; i < nq; i++) {
         /* dq = positions - last; mid = last + 0.5 * dq; rates = dq / dt */
         double dq = q[i] - last[i];
@@ -577,8 +593,8 @@ odometry_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         disp[i] = tw[i] * dt;
     double dist = integrate_into(PyArray_DATA(pose), P, disp, slip * slip * dt,
                                  PyArray_DATA(n_a));
-    out = Py_BuildValue("(OOOd(dddddd)d)", tw_o, res_o, disp_o, slip,
-                        P[0], P[1], P[2], P[3], P[4], P[5], dist);
+    out = Py_BuildValue("(OOOd(dddddd)dO)", tw_o, res_o, disp_o, slip,
+                        P[0], P[1], P[2], P[3], P[4], P[5], dist, copy_o);
 done:
     Py_XDECREF(g_a);
     Py_XDECREF(l_a);
@@ -587,6 +603,7 @@ done:
     Py_XDECREF(tw_o);
     Py_XDECREF(res_o);
     Py_XDECREF(disp_o);
+    Py_XDECREF(copy_o);
     return out;
 }
 
@@ -759,7 +776,7 @@ static PyMethodDef methods[] = {
      "integrate(pose, covariance, disp, slip2_dt, noise) -> (covariance, distance)."},
     {"odometry_step", (PyCFunction)(void (*)(void))odometry_step, METH_FASTCALL,
      "odometry_step(kind, geometry, last, positions, dt, pose, covariance, noise) -> "
-     "(rate_twist, residual, disp, slip, covariance, distance)."},
+     "(rate_twist, residual, disp, slip, covariance, distance, positions) or None."},
     {"twist_update", (PyCFunction)(void (*)(void))twist_update, METH_FASTCALL,
      "twist_update(kind, geometry, history, stamp, positions, disp, dt, terms, rho2, lag) -> "
      "(twist, twist_variance)."},

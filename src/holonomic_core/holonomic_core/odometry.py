@@ -182,6 +182,10 @@ class Odometry:
         nothing was integrated (first reading, or non-finite positions, which
         are skipped and do not become the reference).
         """
+        if self._kernel is not None and self._last_positions is not None:
+            dt = stamp - self._last_stamp
+            if dt > 0.0:
+                return self._update_compiled(positions, stamp, dt)
         # one reduction: any nan or +-inf makes the sum non-finite
         if not math.isfinite(float(np.add.reduce(positions))):
             return False
@@ -192,15 +196,7 @@ class Odometry:
             self._history.append((stamp, self._last_positions, self.twist))
             return False
         dt = stamp - self._last_stamp
-        if dt > 0.0 and self._kernel is not None:
-            # compiled: the arithmetic of the branch below and of _integrate, one call
-            kind, geometry = self._kernel
-            (self.rate_twist, self.residual, disp, self.slip, self._P,
-             dist) = self._hot.odometry_step(kind, geometry, self._last_positions, positions,
-                                             dt, self.pose, self._P, self._noise_terms)
-            self.distance += dist
-        else:
-            disp = self._increment(positions, dt)
+        disp = self._increment(positions, dt)
         self._last_positions = np.array(positions, dtype=float)
         self._last_stamp = stamp
         if dt > 0.0:
@@ -209,6 +205,21 @@ class Odometry:
             # the clock went back: the window's stamps mean nothing any more
             self._history.clear()
             self._history.append((stamp, self._last_positions, self.twist))
+        return True
+
+    def _update_compiled(self, positions: np.ndarray, stamp: float, dt: float) -> bool:
+        """:meth:`update` for an increment with dt > 0 on the compiled path:
+        the check, the estimate and :meth:`_integrate` in one call."""
+        kind, geometry = self._kernel
+        step = self._hot.odometry_step(kind, geometry, self._last_positions, positions, dt,
+                                       self.pose, self._P, self._noise_terms)
+        if step is None:            # a non-finite position: skipped, not the reference
+            return False
+        (self.rate_twist, self.residual, disp, self.slip, self._P, dist,
+         self._last_positions) = step
+        self.distance += dist
+        self._last_stamp = stamp
+        self._update_twist(disp, dt)
         return True
 
     def _increment(self, positions: np.ndarray, dt: float) -> np.ndarray:
