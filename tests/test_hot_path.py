@@ -282,3 +282,48 @@ def test_objects_built_with_compiled_selected_dispatch_to_it(monkeypatch, robot)
     limiter = build(monkeypatch, "compiled", _limiter)
     with pytest.raises(ValueError, match=r"^target: 2 values, need 3$"):
         limiter.limit(np.zeros(2), np.zeros(3), 0.01)
+
+
+# -- reading checks ---------------------------------------------------------------
+
+def test_reading_checks_give_the_pure_path_verdicts(monkeypatch):
+    from holonomic_core.driver import JointReading
+    from holonomic_core.monitor import MonitorLimits, ReadingMonitor
+
+    names = ("a", "b", "c")
+    limits = MonitorLimits(3.0, 0.05, 0.3, 0.5)
+    pure, compiled = both(monkeypatch, lambda: ReadingMonitor(
+        names, np.array([10.0, 10.0, 2.0]), 0.005, limits))
+    rng = np.random.default_rng(6)
+    q = np.zeros(3)
+    stream = []
+    for k in range(3000):
+        v = rng.uniform(-8, 8, 3)
+        q = q + v * 0.005
+        stamp = k * 0.005
+        odd = k % 97
+        # the odd ones: a velocity glitch over 3x the limit, a position jump,
+        # NaN and inf readings, a frozen stamp, the clock going back
+        if odd == 10:
+            v = v.copy(); v[2] = 6.5
+        elif odd == 20:
+            q = q.copy(); q[1] += 0.5
+        elif odd == 30:
+            v = v.copy(); v[0] = math.nan
+        elif odd == 40:
+            q = q.copy(); q[2] = math.inf
+        elif odd in (50, 51):
+            stamp = (k - 1) * 0.005 if odd == 51 else stamp
+        elif odd == 60:
+            stamp -= 1.0
+        stream.append((JointReading(stamp, q.copy(), v.copy(), np.full(3, math.nan)), stamp + 1e-4,
+                       v + rng.uniform(-1, 1, 3) if k % 3 else None))
+        if odd == 40:
+            q[2] = 0.0
+    verdicts = [(pure.check(*item), compiled.check(*item)) for item in stream]
+    assert all(a == b for a, b in verdicts), next((a, b) for a, b in verdicts if a != b)
+    # the stream did exercise every check
+    found = " ".join(a for a, _ in verdicts if a)
+    for words in ("over 3x its limit", "position jumped", "non-finite velocity",
+                  "non-finite position"):
+        assert words in found, words

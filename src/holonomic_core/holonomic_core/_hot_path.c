@@ -763,6 +763,60 @@ done:
     return out;
 }
 
+/* reading_plausible(positions, velocities, bound, last, span) -> bool
+
+   True when ReadingMonitor.check's per-joint tests all pass: every position
+   and velocity finite, |velocity| <= bound [rad/s], and, with a reference
+   reading `last` (a sequence of floats, or None), every |position - last|
+   <= bound x span + 1e-6 [rad]. False sends the caller to the pure-Python
+   loops, which find the same first failure and word its message. */
+static PyObject *
+reading_plausible(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (check_nargs(nargs, 5, "reading_plausible") < 0)
+        return NULL;
+    double span = PyFloat_AsDouble(args[4]);
+    if (span == -1.0 && PyErr_Occurred())
+        return NULL;
+    PyArrayObject *q_a = as_vector(args[0], "positions"), *v_a = NULL, *b_a = NULL;
+    PyObject *last = NULL, *out = NULL;
+    if (q_a == NULL)
+        return NULL;
+    npy_intp n = PyArray_DIM(q_a, 0);
+    v_a = as_vector(args[1], "velocities");
+    if (v_a == NULL || need_length(v_a, n, "velocities") < 0)
+        goto done;
+    b_a = as_vector(args[2], "bound");
+    if (b_a == NULL || need_length(b_a, n, "bound") < 0)
+        goto done;
+    const double *q = PyArray_DATA(q_a), *v = PyArray_DATA(v_a), *bound = PyArray_DATA(b_a);
+    int ok = 1;
+    for (npy_intp i = 0; i < n && ok; i++)
+        ok = isfinite(q[i]) && isfinite(v[i]) && !(fabs(v[i]) > bound[i]);
+    if (ok && args[3] != Py_None) {
+        last = PySequence_Fast(args[3], "last: a sequence of floats");
+        if (last == NULL)
+            goto done;
+        if (PySequence_Fast_GET_SIZE(last) != n) {
+            PyErr_SetString(PyExc_ValueError, "last: one position per joint");
+            goto done;
+        }
+        for (npy_intp i = 0; i < n && ok; i++) {
+            double ref = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(last, i));
+            if (ref == -1.0 && PyErr_Occurred())
+                goto done;
+            ok = !(fabs(q[i] - ref) > bound[i] * span + 1e-6);
+        }
+    }
+    out = PyBool_FromLong(ok);
+done:
+    Py_DECREF(q_a);
+    Py_XDECREF(v_a);
+    Py_XDECREF(b_a);
+    Py_XDECREF(last);
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"limit_twist", (PyCFunction)(void (*)(void))limit_twist, METH_FASTCALL,
      "limit_twist(target, previous, dt, limits) -> twist: TwistLimiter.limit."},
@@ -780,6 +834,8 @@ static PyMethodDef methods[] = {
     {"twist_update", (PyCFunction)(void (*)(void))twist_update, METH_FASTCALL,
      "twist_update(kind, geometry, history, stamp, positions, disp, dt, terms, rho2, lag) -> "
      "(twist, twist_variance)."},
+    {"reading_plausible", (PyCFunction)(void (*)(void))reading_plausible, METH_FASTCALL,
+     "reading_plausible(positions, velocities, bound, last, span) -> bool."},
     {NULL, NULL, 0, NULL},
 };
 
