@@ -327,3 +327,43 @@ def test_reading_checks_give_the_pure_path_verdicts(monkeypatch):
     for words in ("over 3x its limit", "position jumped", "non-finite velocity",
                   "non-finite position"):
         assert words in found, words
+
+
+# -- the whole cycle ----------------------------------------------------------------
+
+def _controller(robot):
+    from holonomic_core.controller import BaseController
+    from holonomic_core.loop import ManualClock
+    from holonomic_core.mock_driver import MockDriver
+
+    cfg = load_config(robot, {"driver": "mock"})
+    clock = ManualClock()
+    driver = MockDriver(cfg.model, cfg.values, cfg.controller.control_rate, clock=clock)
+    driver.configure()
+    ctrl = BaseController(cfg, driver, clock=clock)
+    ctrl.request_enable(True)
+    return ctrl, clock
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_a_controller_on_either_path_commands_the_same_joints(monkeypatch, robot):
+    (pure, pure_clock), (compiled, compiled_clock) = both(monkeypatch, lambda: _controller(robot))
+    rng = np.random.default_rng(7)
+    vmax = np.array(pure.config.controller.max_velocity)
+    for k in range(1500):
+        command = None
+        if k % 50 == 0:
+            # twice the speed limits (limited, saturated), a NaN (rejected:
+            # stop), and from cycle 1200 on none (the command times out)
+            command = rng.uniform(-2, 2, 3) * vmax if k % 350 else (math.nan, 0.0, 0.0)
+        for ctrl, clock in ((pure, pure_clock), (compiled, compiled_clock)):
+            if command is not None and k < 1200:
+                ctrl.set_command(command)
+            clock.now += ctrl.dt
+            ctrl.step()
+        assert same_bits(pure.joint_command, compiled.joint_command), k
+        assert same_bits(pure.twist_command, compiled.twist_command), k
+        assert same_bits(pure.odometry.pose, compiled.odometry.pose), k
+        assert pure.saturation == compiled.saturation and pure.fault == compiled.fault, k
+    assert pure.fault is None and pure.stale          # it ran, and timed out at the end
+    assert np.abs(pure.odometry.pose[:2]).max() > 0.05

@@ -2,28 +2,29 @@
 
 The closed forms of a cycle -- the twist limits, the inverse kinematics
 (DDROT and PCV), the joint-rate saturation, the slip_min fit and the DDROT's
-forward kinematics, the odometry's arc and covariance -- exist twice: the
-pure-Python reference (in the modules that own each equation) and the C
-extension ``holonomic_core._hot_path``, built by ``make setup`` (colcon
-builds it from ``_hot_path.c``), which does each of them in one call with
-the same arithmetic in the same order (docs/hot_path.md: which results are
-bitwise equal and which agree to a few ulp).
+forward kinematics, the odometry's increment, arc and covariance, the twist
+window's line fit, the reading checks -- exist twice: the pure-Python
+reference (in the modules that own each equation) and the C extension
+``holonomic_core._hot_path``, built by ``make setup`` (colcon builds it from
+``_hot_path.c``), which does each of them in one call with the same
+arithmetic in the same order (docs/hot_path.md: which results are bitwise
+equal and which agree to a few ulp).
 
 Selection: the environment variable ``HOLONOMIC_HOT_PATH``, read when a
-cycle object (``TwistLimiter``, a kinematics object, ``Odometry``) is built
-and when this module is first imported (``saturate_joint_rates``):
+cycle object is built (``TwistLimiter``, a kinematics object, ``Odometry``,
+``ReadingMonitor``, ``BaseController``'s saturation):
 
 * ``auto`` (default): the compiled module when it is built, else the pure
   path with one warning line on stderr -- the numbers are the same, only
-  the cycle costs about 3x more, which a 200 Hz loop affords;
+  the cycle costs several times more, which a 200 Hz loop affords;
 * ``compiled``: the compiled module, or ImportError (a 1 kHz robot that
   needs it should not start without it);
 * ``pure``: the pure-Python path (debugging, profiling the reference).
 
-The dispatching functions: ``TwistLimiter.limit``,
-``holonomic_core.limits.saturate_joint_rates``, ``BaseKinematics.inverse``
-and ``.estimate`` of the families that give a ``hot_path_geometry``, and
-``Odometry.update`` (one ``odometry_step`` call for an increment with dt > 0).
+The dispatching methods (docs/hot_path.md has the table): ``TwistLimiter.limit``,
+``limits.joint_rate_saturation()``, ``inverse`` and ``estimate`` of the
+kinematics families, ``Odometry.update`` (through the families'
+``hot_path_geometry``) and ``_update_twist``, ``ReadingMonitor.check``.
 """
 
 from __future__ import annotations
