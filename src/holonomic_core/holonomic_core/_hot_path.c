@@ -62,6 +62,33 @@ new_vector(npy_intp n, double **data)
     return out;
 }
 
+/* A new float64 array holding a copy of src[0..n). */
+static PyObject *
+vector_from(const double *src, npy_intp n)
+{
+    double *o;
+    PyObject *out = new_vector(n, &o);
+    if (out != NULL && n > 0)
+        memcpy(o, src, n * sizeof(double));
+    return out;
+}
+
+/* A float argument into *out; -1 with the exception set. */
+static int
+arg_double(PyObject *obj, double *out)
+{
+    *out = PyFloat_AsDouble(obj);
+    return (*out == -1.0 && PyErr_Occurred()) ? -1 : 0;
+}
+
+/* An int argument (a KIND_* constant) into *out; -1 with the exception set. */
+static int
+arg_kind(PyObject *obj, long *out)
+{
+    *out = PyLong_AsLong(obj);
+    return (*out == -1 && PyErr_Occurred()) ? -1 : 0;
+}
+
 static int
 check_nargs(Py_ssize_t nargs, Py_ssize_t want, const char *name)
 {
@@ -80,8 +107,8 @@ limit_twist(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (check_nargs(nargs, 4, "limit_twist") < 0)
         return NULL;
-    double dt = PyFloat_AsDouble(args[2]);
-    if (dt == -1.0 && PyErr_Occurred())
+    double dt;
+    if (arg_double(args[2], &dt) < 0)
         return NULL;
     PyArrayObject *tgt_a = as_vector(args[0], "target"), *prev_a = NULL, *lim_a = NULL;
     PyObject *out = NULL;
@@ -279,8 +306,8 @@ inverse(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (check_nargs(nargs, 4, "inverse") < 0)
         return NULL;
-    long kind = PyLong_AsLong(args[0]);
-    if (kind == -1 && PyErr_Occurred())
+    long kind;
+    if (arg_kind(args[0], &kind) < 0)
         return NULL;
     PyArrayObject *q_a = as_vector(args[1], "positions"), *t_a = NULL, *g_a = NULL;
     PyObject *out = NULL;
@@ -351,12 +378,12 @@ estimate(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (check_nargs(nargs, 4, "estimate") < 0)
         return NULL;
-    long kind = PyLong_AsLong(args[0]);
-    if (kind == -1 && PyErr_Occurred())
+    long kind;
+    if (arg_kind(args[0], &kind) < 0)
         return NULL;
     PyArrayObject *q_a = as_vector(args[1], "positions"), *v_a = NULL, *g_a = NULL;
     PyObject *out = NULL, *tw_o = NULL, *res_o = NULL;
-    double tw[3], res[MAX_CASTERS], scratch[4 * MAX_CASTERS], *o;
+    double tw[3], res[MAX_CASTERS], scratch[4 * MAX_CASTERS];
     if (q_a == NULL)
         return NULL;
     v_a = as_vector(args[2], "velocities");
@@ -374,15 +401,12 @@ estimate(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                                   tw, res, scratch);
     if (nres < 0)
         goto done;
-    tw_o = new_vector(3, &o);
+    tw_o = vector_from(tw, 3);
     if (tw_o == NULL)
         goto done;
-    o[0] = tw[0]; o[1] = tw[1]; o[2] = tw[2];
-    res_o = new_vector(nres, &o);
+    res_o = vector_from(res, nres);
     if (res_o == NULL)
         goto done;
-    for (npy_intp i = 0; i < nres; i++)
-        o[i] = res[i];
     out = PyTuple_Pack(2, tw_o, res_o);
 done:
     Py_DECREF(q_a);
@@ -480,8 +504,8 @@ integrate(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     double P[6];
     if (writable_pose(args[0], &pose) < 0 || read_covariance(args[1], P) < 0)
         return NULL;
-    double slip2_dt = PyFloat_AsDouble(args[3]);
-    if (slip2_dt == -1.0 && PyErr_Occurred())
+    double slip2_dt;
+    if (arg_double(args[3], &slip2_dt) < 0)
         return NULL;
     d_a = as_vector(args[2], "disp");
     if (d_a == NULL || need_length(d_a, 3, "disp") < 0)
@@ -513,16 +537,16 @@ odometry_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (check_nargs(nargs, 8, "odometry_step") < 0)
         return NULL;
-    long kind = PyLong_AsLong(args[0]);
-    if (kind == -1 && PyErr_Occurred())
+    long kind;
+    if (arg_kind(args[0], &kind) < 0)
         return NULL;
-    double dt = PyFloat_AsDouble(args[4]);
-    if (dt == -1.0 && PyErr_Occurred())
+    double dt;
+    if (arg_double(args[4], &dt) < 0)
         return NULL;
     PyArrayObject *pose, *g_a = NULL, *l_a = NULL, *q_a = NULL, *n_a = NULL;
     PyObject *out = NULL, *tw_o = NULL, *res_o = NULL, *disp_o = NULL, *copy_o = NULL;
     double P[6], mid[2 * MAX_CASTERS], rates[2 * MAX_CASTERS], tw[3], res[MAX_CASTERS];
-    double scratch[4 * MAX_CASTERS], *o, *disp;
+    double scratch[4 * MAX_CASTERS], *disp;
     if (writable_pose(args[5], &pose) < 0 || read_covariance(args[6], P) < 0)
         return NULL;
     g_a = as_vector(args[1], "geometry");
@@ -554,10 +578,9 @@ odometry_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             goto done;
         }
     }
-    copy_o = new_vector(nq, &o);
+    copy_o = vector_from(q, nq);
     if (copy_o == NULL)
         goto done;
-    memcpy(o, q, nq * sizeof(double));
     for (npy_intp i = 0; i < nq; i++) {
         /* dq = positions - last; mid = last + 0.5 * dq; rates = dq / dt */
         double dq = q[i] - last[i];
@@ -577,15 +600,12 @@ odometry_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             ss += res[i] * res[i];
         slip = sqrt(ss / (double)nres);
     }
-    tw_o = new_vector(3, &o);
+    tw_o = vector_from(tw, 3);
     if (tw_o == NULL)
         goto done;
-    o[0] = tw[0]; o[1] = tw[1]; o[2] = tw[2];
-    res_o = new_vector(nres, &o);
+    res_o = vector_from(res, nres);
     if (res_o == NULL)
         goto done;
-    for (npy_intp i = 0; i < nres; i++)
-        o[i] = res[i];
     disp_o = new_vector(3, &disp);
     if (disp_o == NULL)
         goto done;
@@ -650,20 +670,20 @@ twist_update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (check_nargs(nargs, 10, "twist_update") < 0)
         return NULL;
-    long kind = PyLong_AsLong(args[0]);
-    if (kind == -1 && PyErr_Occurred())
+    long kind;
+    if (arg_kind(args[0], &kind) < 0)
         return NULL;
-    double stamp = PyFloat_AsDouble(args[3]);
-    if (stamp == -1.0 && PyErr_Occurred())
+    double stamp;
+    if (arg_double(args[3], &stamp) < 0)
         return NULL;
-    double dt = PyFloat_AsDouble(args[6]);
-    if (dt == -1.0 && PyErr_Occurred())
+    double dt;
+    if (arg_double(args[6], &dt) < 0)
         return NULL;
-    double rho2 = PyFloat_AsDouble(args[8]);
-    if (rho2 == -1.0 && PyErr_Occurred())
+    double rho2;
+    if (arg_double(args[8], &rho2) < 0)
         return NULL;
-    double lag = PyFloat_AsDouble(args[9]);
-    if (lag == -1.0 && PyErr_Occurred())
+    double lag;
+    if (arg_double(args[9], &lag) < 0)
         return NULL;
     PyArrayObject *g_a = NULL, *q_a = NULL, *d_a = NULL, *t_a = NULL;
     PyObject *seq = NULL, *out = NULL, *tw_o = NULL;
@@ -775,8 +795,8 @@ reading_plausible(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (check_nargs(nargs, 5, "reading_plausible") < 0)
         return NULL;
-    double span = PyFloat_AsDouble(args[4]);
-    if (span == -1.0 && PyErr_Occurred())
+    double span;
+    if (arg_double(args[4], &span) < 0)
         return NULL;
     PyArrayObject *q_a = as_vector(args[0], "positions"), *v_a = NULL, *b_a = NULL;
     PyObject *last = NULL, *out = NULL;
