@@ -370,7 +370,7 @@ estimate_into(long kind, const double *q, npy_intp nq, const double *v, const do
     return -1;
 }
 
-#define MAX_CASTERS 64
+#define MAX_CASTERS 64     /* hot_path.MAX_CASTERS: beyond it the Python side stays pure */
 
 /* estimate(kind, positions, velocities, geometry) -> (twist, residual) */
 static PyObject *

@@ -40,6 +40,8 @@ CHOICES = ("auto", "compiled", "pure")
 #: kinematics kinds of the compiled module (its KIND_* constants)
 KIND_DDROT = 1
 KIND_PCV = 2
+#: the compiled PCV fit's fixed buffers hold this many casters (more: pure path)
+MAX_CASTERS = 64
 
 _loaded: ModuleType | None = None
 _import_error: str | None = None

@@ -191,7 +191,7 @@ class PoweredCasterKinematics(BaseKinematics):
         self._geometry = tuple((float(c.axis[0]), float(c.axis[1]), float(c.caster_offset),
                                 float(c.wheel_radius)) for c in casters)
         #: the compiled closed forms (hot_path), None for the pure-Python path
-        self._hot = hot_path.module()
+        self._hot = hot_path.module() if len(casters) <= hot_path.MAX_CASTERS else None
         self._hot_geometry = np.array(self._geometry, dtype=float).ravel()
 
     @property
@@ -312,7 +312,9 @@ class PoweredCasterKinematics(BaseKinematics):
 
     def hot_path_geometry(self, estimator: str = "slip_min") -> tuple[int, np.ndarray] | None:
         """The compiled form covers the slip_min fit (robust and pinv stay in Python)."""
-        return (hot_path.KIND_PCV, self._hot_geometry) if estimator == "slip_min" else None
+        if estimator != "slip_min" or len(self.casters) > hot_path.MAX_CASTERS:
+            return None
+        return hot_path.KIND_PCV, self._hot_geometry
 
     def _fit(self, positions, velocities):
         """The slip_min fit in scalar math, with what the robust test needs.
