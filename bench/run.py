@@ -168,7 +168,7 @@ def format_table(r: dict) -> str:
             f"{'compiled ' if pure else ''}{c['compute_us']:.1f} µs vs baseline "
             f"{c['baseline_us']:.1f} µs: **{c['speedup']:.1f}×**{pure or ''}; full cycle with "
             f"driver I/O and checks {c['full_cycle_us']:.1f} µs{pure_full or ''} (median of "
-            f"{c['cycles']} each{same or ''}) | ≥ 5× faster"
+            f"{c['cycles']} each{same or ''}) | ≥ 5× faster (aim 10×)"
             + (", ≤ 30 µs" if c["joints"] > 3 else "") + " | "
             + verdict(c["speedup"] >= 5.0 and (c["joints"] <= 3 or c["compute_us"] <= 30.0))
             + (f" (≤ 30 µs met)" if c["joints"] > 3 and c["compute_us"] <= 30.0
