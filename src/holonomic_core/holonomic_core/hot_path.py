@@ -85,7 +85,7 @@ def module(selected: str | None = None) -> ModuleType | None:
     if not _warned:
         _warned = True
         print(f"holonomic_core: warning: the compiled hot path is not built ({_import_error}); "
-              f"running the pure-Python cycle (same numbers, ~3x the compute; `make setup` "
+              f"running the pure-Python cycle (same numbers, 4-8x the compute; `make setup` "
               f"builds it, {ENV}=pure silences this)", file=sys.stderr)
     return None
 
