@@ -492,36 +492,6 @@ writable_pose(PyObject *obj, PyArrayObject **pose)
     return 0;
 }
 
-/* integrate(pose, covariance, disp, slip2_dt, noise) -> (covariance, distance);
-   pose (x, y, yaw) updated in place. */
-static PyObject *
-integrate(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    if (check_nargs(nargs, 5, "integrate") < 0)
-        return NULL;
-    PyArrayObject *pose, *d_a = NULL, *n_a = NULL;
-    PyObject *out = NULL;
-    double P[6];
-    if (writable_pose(args[0], &pose) < 0 || read_covariance(args[1], P) < 0)
-        return NULL;
-    double slip2_dt;
-    if (arg_double(args[3], &slip2_dt) < 0)
-        return NULL;
-    d_a = as_vector(args[2], "disp");
-    if (d_a == NULL || need_length(d_a, 3, "disp") < 0)
-        goto done;
-    n_a = as_vector(args[4], "noise");
-    if (n_a == NULL || need_length(n_a, 5, "noise") < 0)
-        goto done;
-    double dist = integrate_into(PyArray_DATA(pose), P, PyArray_DATA(d_a), slip2_dt,
-                                 PyArray_DATA(n_a));
-    out = Py_BuildValue("((dddddd)d)", P[0], P[1], P[2], P[3], P[4], P[5], dist);
-done:
-    Py_XDECREF(d_a);
-    Py_XDECREF(n_a);
-    return out;
-}
-
 /* odometry_step(kind, geometry, last_positions, positions, dt, pose,
    covariance, noise) -> (rate_twist, residual, disp, slip, covariance,
    distance, positions as a new float64 array), or None when a position is
@@ -846,8 +816,6 @@ static PyMethodDef methods[] = {
      "inverse(kind, positions, twist, geometry) -> joint rates [rad/s]."},
     {"estimate", (PyCFunction)(void (*)(void))estimate, METH_FASTCALL,
      "estimate(kind, positions, velocities, geometry) -> (twist, residual)."},
-    {"integrate", (PyCFunction)(void (*)(void))integrate, METH_FASTCALL,
-     "integrate(pose, covariance, disp, slip2_dt, noise) -> (covariance, distance)."},
     {"odometry_step", (PyCFunction)(void (*)(void))odometry_step, METH_FASTCALL,
      "odometry_step(kind, geometry, last, positions, dt, pose, covariance, noise) -> "
      "(rate_twist, residual, disp, slip, covariance, distance, positions) or None."},
