@@ -39,3 +39,4 @@ mutation: setup
 
 clean:
 	rm -rf $(VENV) $(WS) out .pytest_cache .hypothesis
+	find src -name '_hot_path*.so' -delete

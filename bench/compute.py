@@ -8,6 +8,7 @@ machine, interleaved where it matters, so a noisy machine shifts both sides.
 from __future__ import annotations
 
 import math
+import os
 import time
 
 import numpy as np
@@ -65,47 +66,42 @@ def _time_cycles(fn, cycles: int) -> np.ndarray:
     return out * 1e-3          # [us]
 
 
-def cycle_compute(robot: str, cycles: int = 100_000) -> dict:
-    """Median [us] per cycle, in alternating blocks of the same run, of
+def _with_hot_path(selected: str, factory):
+    """``factory()`` with HOLONOMIC_HOT_PATH=selected (read when cycle objects are built)."""
+    from holonomic_core import hot_path
 
-    * ``compute``: the work the baseline does -- twist limits, exact inverse
-      kinematics, joint-rate saturation, odometry (slip_min fit, SE(2)
-      composition, covariance) -- with our classes;
-    * ``baseline``: the same work written the straightforward way
-      (:class:`BaselineCycle`: numpy pinv of C and fresh arrays every cycle);
-    * ``full_cycle``: ``BaseController.step`` with the mock driver (driver
-      read and write, plausibility checks, command timeout, all of the above).
-    """
-    from holonomic_core.limits import TwistLimiter, saturate_joint_rates
+    before = os.environ.get(hot_path.ENV)
+    os.environ[hot_path.ENV] = selected
+    try:
+        return factory()
+    finally:
+        if before is None:
+            del os.environ[hot_path.ENV]
+        else:
+            os.environ[hot_path.ENV] = before
+
+
+def _cycle_functions(robot: str, targets, qs):
+    """(compute, full) cycle functions with objects built under the current selection."""
+    from holonomic_core.limits import TwistLimiter, joint_rate_saturation
     from holonomic_core.odometry import Odometry
 
     cfg = load_config(robot, {"driver": "mock", "cmd_timeout": 0.0})
     c = cfg.controller
     model = cfg.model
-    n = len(model.joint_names)
-    rng = np.random.default_rng(0)
-    targets = rng.uniform(-1.0, 1.0, (1024, 3)) * np.array(c.max_velocity)
-    qs = np.cumsum(rng.uniform(-0.01, 0.01, (1024, n)), axis=0)   # a smooth encoder walk
-    dqs = np.diff(qs, axis=0, prepend=qs[:1])
     dt = 1.0 / c.control_rate
-
     limiter = TwistLimiter(c.max_velocity, c.max_acceleration, c.max_deceleration)
     kin, max_rates = model.kinematics, model.max_joint_velocity
+    saturate = joint_rate_saturation()
     odometry = Odometry(model, c.estimator, c.noise)
     state = {"prev": np.zeros(3)}
 
     def compute(i):
         k = i & 1023
         twist = limiter.limit(targets[k], state["prev"], dt)
-        rates, _ = saturate_joint_rates(kin.inverse(qs[k], twist), max_rates)
+        rates, _ = saturate(kin.inverse(qs[k], twist), max_rates)
         odometry.update(qs[k], i * dt)
         state["prev"] = twist
-
-    base = BaselineCycle(cfg)
-
-    def baseline(i):
-        k = i & 1023
-        base.step(qs[k], dqs[k], targets[k])
 
     clock = ManualClock()
     driver = MockDriver(model, cfg.values, c.control_rate, clock=clock)
@@ -122,17 +118,64 @@ def cycle_compute(robot: str, cycles: int = 100_000) -> dict:
         clock.now += ctrl.dt
         ctrl.step()
 
+    return compute, full, ctrl
+
+
+def cycle_compute(robot: str, cycles: int = 100_000) -> dict:
+    """Median [us] per cycle, in alternating blocks of the same run, of
+
+    * ``compute`` / ``compute_pure``: the work the baseline does -- twist
+      limits, exact inverse kinematics, joint-rate saturation, odometry
+      (slip_min fit, SE(2) composition, covariance) -- with our classes, on
+      the compiled hot path and on the pure-Python path
+      (:mod:`holonomic_core.hot_path`);
+    * ``baseline``: the same work written the straightforward way
+      (:class:`BaselineCycle`: numpy pinv of C and fresh arrays every cycle);
+    * ``full_cycle`` / ``full_cycle_pure``: ``BaseController.step`` with the
+      mock driver (driver read and write, plausibility checks, command
+      timeout, the twist window's line fit, all of the above), compiled / pure.
+    """
+    from holonomic_core import hot_path
+
+    cfg = load_config(robot, {"driver": "mock", "cmd_timeout": 0.0})
+    c = cfg.controller
+    n = len(cfg.model.joint_names)
+    rng = np.random.default_rng(0)
+    targets = rng.uniform(-1.0, 1.0, (1024, 3)) * np.array(c.max_velocity)
+    qs = np.cumsum(rng.uniform(-0.01, 0.01, (1024, n)), axis=0)   # a smooth encoder walk
+    dqs = np.diff(qs, axis=0, prepend=qs[:1])
+
+    hot_path.module("compiled")          # ImportError here: `make setup` did not build it
+    compute, full, ctrl = _with_hot_path("compiled", lambda: _cycle_functions(robot, targets, qs))
+    compute_pure, full_pure, ctrl_pure = _with_hot_path(
+        "pure", lambda: _cycle_functions(robot, targets, qs))
+    base = BaselineCycle(cfg)
+
+    def baseline(i):
+        k = i & 1023
+        base.step(qs[k], dqs[k], targets[k])
+
     block = 5000
-    times = {"compute": [], "baseline": [], "full_cycle": []}
+    fns = (("compute", compute), ("compute_pure", compute_pure), ("baseline", baseline),
+           ("full_cycle", full), ("full_cycle_pure", full_pure))
+    times = {name: [] for name, _ in fns}
     for _ in range(max(1, cycles // block)):
-        for name, fn in (("compute", compute), ("baseline", baseline), ("full_cycle", full)):
+        for name, fn in fns:
             times[name].append(_time_cycles(fn, block))
     med = {k: float(np.median(np.concatenate(v))) for k, v in times.items()}
-    if ctrl.fault:
-        raise RuntimeError(f"{robot}: the controller faulted during the benchmark: {ctrl.fault}")
+    for controller in (ctrl, ctrl_pure):
+        if controller.fault:
+            raise RuntimeError(f"{robot}: the controller faulted during the benchmark: "
+                               f"{controller.fault}")
+    # both paths computed the same cycles: the same joint commands and pose
+    same = (np.array_equal(ctrl.joint_command, ctrl_pure.joint_command)
+            and np.array_equal(ctrl.odometry.pose, ctrl_pure.odometry.pose))
     return {"robot": robot, "joints": n, "compute_us": med["compute"],
-            "baseline_us": med["baseline"], "full_cycle_us": med["full_cycle"],
-            "speedup": med["baseline"] / med["compute"], "cycles": cycles}
+            "compute_pure_us": med["compute_pure"], "baseline_us": med["baseline"],
+            "full_cycle_us": med["full_cycle"], "full_cycle_pure_us": med["full_cycle_pure"],
+            "speedup": med["baseline"] / med["compute"],
+            "speedup_pure": med["baseline"] / med["compute_pure"],
+            "same_numbers": bool(same), "cycles": cycles}
 
 
 def simulation_speed(robot: str, seconds: float = 10.0,

@@ -70,15 +70,19 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
     parser.add_argument("--render", type=Path, metavar="JSON",
                         help="only rewrite the page from a previous run's results")
-    parser.add_argument("--only", choices=("sim",),
+    parser.add_argument("--only", choices=("sim", "compute"),
                         help="re-run only the simulation-speed rows (ideal motors and drive "
-                             "model); the page keeps the last run's others")
+                             "model) or the control-cycle compute rows; the page keeps the "
+                             "last run's others")
     args = parser.parse_args(argv)
     if args.only:
         saved = json.loads(args.out.with_suffix(".json").read_text())
         t0 = time.monotonic()
-        saved["results"]["sim"] = sim_rows(_step, args.quick)
-        saved["results"]["sim_drive"] = sim_drive_rows(_step, args.quick)
+        if args.only == "sim":
+            saved["results"]["sim"] = sim_rows(_step, args.quick)
+            saved["results"]["sim_drive"] = sim_drive_rows(_step, args.quick)
+        else:
+            saved["results"]["compute"] = compute_rows(_step, args.quick)
         saved.setdefault("reruns", {})[args.only] = (
             datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
             + f" on: {machine()}")
@@ -102,9 +106,7 @@ def main(argv=None) -> int:
     results: dict = {}
 
     step = _step
-    cycles = 20_000 if quick else 100_000
-    results["compute"] = [step(f"cycle compute {r}", compute.cycle_compute, r, cycles)
-                          for r in ("hamr", "xr4000")]
+    results["compute"] = compute_rows(step, quick)
     results["sim"] = sim_rows(step, quick)
     results["sim_drive"] = sim_drive_rows(step, quick)
     results["fleet"] = step("fleet", compute.fleet_speed, "hamr",
@@ -132,6 +134,13 @@ def main(argv=None) -> int:
     return 0
 
 
+def compute_rows(step, quick: bool) -> list[dict]:
+    """Control-cycle compute, compiled and pure-Python paths, against the baseline."""
+    cycles = 20_000 if quick else 100_000
+    return [step(f"cycle compute {r}", compute.cycle_compute, r, cycles)
+            for r in ("hamr", "xr4000")]
+
+
 def sim_rows(step, quick: bool) -> list[dict]:
     """Simulation speed with ideal motors (``sim.ideal_motors``) against raw pybullet."""
     return [step(f"simulation speed {r}", compute.simulation_speed, r, 5.0 if quick else 20.0)
@@ -148,11 +157,18 @@ def sim_drive_rows(step, quick: bool) -> list[dict]:
 def format_table(r: dict) -> str:
     rows = ["| what | measured | target | |", "|---|---|---|---|"]
     for c in r["compute"]:
+        pure = ("compute_pure_us" in c) and (
+            f" (pure-Python path {c['compute_pure_us']:.1f} µs: {c['speedup_pure']:.1f}×)")
+        pure_full = ("full_cycle_pure_us" in c) and f" (pure {c['full_cycle_pure_us']:.1f} µs)"
+        same = ("same_numbers" in c) and (
+            "; both paths computed the same commands and pose" if c["same_numbers"]
+            else "; **the two paths' commands or pose differ**")
         rows.append(
             f"| control-cycle compute, {c['robot']} ({c['joints']} joints) | "
-            f"{c['compute_us']:.1f} µs vs baseline {c['baseline_us']:.1f} µs: "
-            f"**{c['speedup']:.1f}×**; full cycle with driver I/O and checks "
-            f"{c['full_cycle_us']:.1f} µs (median of {c['cycles']} each) | ≥ 5× faster"
+            f"{'compiled ' if pure else ''}{c['compute_us']:.1f} µs vs baseline "
+            f"{c['baseline_us']:.1f} µs: **{c['speedup']:.1f}×**{pure or ''}; full cycle with "
+            f"driver I/O and checks {c['full_cycle_us']:.1f} µs{pure_full or ''} (median of "
+            f"{c['cycles']} each{same or ''}) | ≥ 5× faster (aim 10×)"
             + (", ≤ 30 µs" if c["joints"] > 3 else "") + " | "
             + verdict(c["speedup"] >= 5.0 and (c["joints"] <= 3 or c["compute_us"] <= 30.0))
             + (f" (≤ 30 µs met)" if c["joints"] > 3 and c["compute_us"] <= 30.0
@@ -237,12 +253,6 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
 
 ## The targets not met, and what it would take
 
-- **Compute ≥ 5× the baseline.** The per-cycle math runs on Python floats with no matrix
-  inversion (the closed-form slip_min fit, the scalar covariance update, the limits on three
-  floats); what is left is interpreter overhead -- about 1 µs per Python-level operation on
-  this CPU -- and the baseline is itself numpy calls of a few µs each, so the ratio stays near
-  2.5-3.5× (the ≤ 30 µs for four casters is met with room). A 5× margin needs the cycle out of
-  the interpreter: the same closed forms in a small C extension or numba (not tried here).
 - **1 kHz loop: p99 ≤ 1.1 ms and nothing later than 5 ms.** The loop thread sleeps to absolute
   deadlines and busy-waits the last 0.2 ms, but it shares the GIL with the executor thread
   (callbacks, publishing) and two cores with the DDS threads and the traffic generator: about
@@ -271,7 +281,12 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   straightforward way (`bench/compute.py: BaselineCycle`: C rebuilt and `numpy.linalg.pinv(C)`
   every cycle, fresh arrays, numpy clipping), 5000-cycle blocks alternating, medians. "Full
   cycle" is `BaseController.step` with the mock driver: also driver read and write, the
-  plausibility checks of every reading, the command timeout.
+  plausibility checks of every reading, the command timeout. Both paths of
+  `HOLONOMIC_HOT_PATH` (docs/hot_path.md) are measured in the same run, objects built under
+  each: the compiled closed forms (the ratio that counts) and the pure-Python reference, which
+  stays interpreter-bound (~1 µs per Python operation) at 1.5-3.5× the baseline. The
+  benchmark also checks that both controllers end with the same joint commands and pose.
+  `python bench/run.py --only compute` re-runs these two rows alone.
 - **1 kHz loop**: `holonomic-bringup hamr --driver mock -p control_rate:=1000.0` as its own
   process; this process publishes `cmd_vel` at 100 Hz and subscribes `odom`. The loop's period
   statistics come from its own diagnostics (1 Hz, each over the last 2000 cycles, overlapping

@@ -107,7 +107,7 @@ if "$VENV/bin/python" -c 'import tf2_msgs.msg' 2>/dev/null \
 fi
 
 BUILD_INPUTS=$(cd "$ROOT" && find src -name package.xml -o -name setup.py -o -name setup.cfg \
-    -o -name CMakeLists.txt -o -name '*.msg' -o -name __init__.py -o -path 'src/*/resource/*' | sort)
+    -o -name CMakeLists.txt -o -name '*.msg' -o -name '*.c' -o -name __init__.py -o -path 'src/*/resource/*' | sort)
 BUILD_HASH="$(cd "$ROOT" && { echo "$BUILD_INPUTS"; echo "${SKIP[*]:-}"; ls config; } | sha256sum | cut -d' ' -f1)"
 BUILD_HASH="$BUILD_HASH-$(cd "$ROOT" && hash_of $BUILD_INPUTS)"
 if [[ $FORCE == 1 || "$(cat "$WS/.build.sha256" 2>/dev/null)" != "$BUILD_HASH" || ! -d "$WS/install" ]]; then

@@ -1,13 +1,26 @@
 import glob
 import os
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
+
+import numpy
 
 PACKAGE = "holonomic_core"
 
 # The robot configs live at the repository root (config/) so users find them;
 # install them into share/ so an installed workspace finds them too.
 CONFIGS = sorted(os.path.relpath(p) for p in glob.glob(os.path.join("..", "..", "config", "*.yaml")))
+
+# The control cycle's closed forms, compiled (holonomic_core/hot_path.py says
+# which functions dispatch to it). Not optional: `make setup` fails loudly
+# when it does not compile; at run time a missing module falls back to the
+# pure-Python path with one warning line. -ffp-contract=off: no fused
+# multiply-add, so the results stay those of the Python expressions.
+HOT_PATH = Extension(
+    PACKAGE + "._hot_path", [PACKAGE + "/_hot_path.c"],
+    include_dirs=[numpy.get_include()],
+    extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math"],
+)
 
 setup(
     name=PACKAGE,
@@ -20,10 +33,11 @@ setup(
         ("share/" + PACKAGE, ["package.xml"]),
         ("share/" + PACKAGE + "/config", CONFIGS),
     ],
-    install_requires=["setuptools"],
+    ext_modules=[HOT_PATH],
+    install_requires=["setuptools", "numpy"],
     # colcon test runs pytest (not unittest) on test/ when pytest is a test dependency
     extras_require={"test": ["pytest"]},
-    zip_safe=True,
+    zip_safe=False,
     maintainer="Holonomic base developers",
     maintainer_email="dev@holonomic.invalid",
     description="ROS-free core: robot model, kinematics protocol, odometry, limits, driver interface",

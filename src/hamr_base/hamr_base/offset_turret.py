@@ -40,6 +40,7 @@ from typing import Mapping
 
 import numpy as np
 
+from holonomic_core import hot_path
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics
 from holonomic_core.schema import ConfigError, ParamSpec, number_or_none
 
@@ -89,6 +90,9 @@ class OffsetTurretKinematics(BaseKinematics):
         self.r = 0.5 * (self.r_left + self.r_right)
         self.a = float(half_wheel_separation)
         self.b = float(turret_offset)
+        #: the compiled closed forms (hot_path), None for the pure-Python path
+        self._hot = hot_path.module()
+        self._hot_geometry = np.array([self.a, self.b, self.r_left, self.r_right])
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -97,6 +101,8 @@ class OffsetTurretKinematics(BaseKinematics):
     # -- kinematics -----------------------------------------------------------
     def inverse(self, positions: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """(wL, wR, phi_dot) [rad/s] for body twist (vx, vy, wz) at turret angle phi."""
+        if self._hot is not None:
+            return self._hot.inverse(hot_path.KIND_DDROT, positions, twist, self._hot_geometry)
         phi = positions[2]
         s, c = math.sin(phi), math.cos(phi)
         vx, vy, wz = twist[0], twist[1], twist[2]
@@ -126,6 +132,10 @@ class OffsetTurretKinematics(BaseKinematics):
                  estimator: str = "slip_min") -> tuple[np.ndarray, np.ndarray]:
         """(twist, residual): exact, so the residual is always empty."""
         return self.forward(positions, velocities, estimator), _NO_RESIDUAL
+
+    def hot_path_geometry(self, estimator: str = "slip_min") -> tuple[int, np.ndarray] | None:
+        """The compiled forward kinematics serve every estimator (they are exact)."""
+        return hot_path.KIND_DDROT, self._hot_geometry
 
     def jacobian(self, positions: np.ndarray) -> np.ndarray:
         """J_joint_to_base (3x3): twist = J @ (wL, wR, phi_dot)."""

@@ -33,7 +33,7 @@ import numpy as np
 from holonomic_core.config import RobotConfig
 from holonomic_core.drift_watch import DriftWatch
 from holonomic_core.driver import Driver, DriverError, DriverFault, DriverState, JointReading
-from holonomic_core.limits import TwistLimiter, is_finite_twist, saturate_joint_rates
+from holonomic_core.limits import TwistLimiter, is_finite_twist, joint_rate_saturation
 from holonomic_core.monitor import ReadingMonitor
 from holonomic_core.odometry import Odometry
 from holonomic_core.se2 import relative_pose
@@ -76,6 +76,8 @@ class BaseController:
                                       self.dt, c.monitor)
         self._clock = clock
         self._max_rates = self.model.max_joint_velocity
+        # compiled or pure, as the limiter, kinematics and odometry (hot_path)
+        self._saturate = joint_rate_saturation()
         corrections = self.model.zero_corrections
         self._zero_corrections = corrections if corrections.any() else None
         #: the calibration drift watch (None where it does not apply)
@@ -217,7 +219,7 @@ class BaseController:
             target = np.asarray(sample[1], float) + pull
         twist = self.limiter.limit(target, self.twist_command, self.dt)
         rates = self.model.kinematics.inverse(reading.positions, twist)
-        rates, scale = saturate_joint_rates(rates, self._max_rates)
+        rates, scale = self._saturate(rates, self._max_rates)
         try:
             if self.torque is None:
                 self.driver.write_velocities(rates)

@@ -76,6 +76,13 @@ class BaseKinematics(abc.ABC):
         return (self.forward(positions, velocities, estimator),
                 self.fit_residual(positions, velocities, estimator))
 
+    def hot_path_geometry(self, estimator: str = "slip_min") -> tuple[int, np.ndarray] | None:
+        """``(kind, geometry)`` of the compiled closed forms
+        (:mod:`holonomic_core.hot_path`) for this family and ``estimator``, or
+        None when they have none (the pure-Python methods then run). A
+        family without a compiled form needs nothing here."""
+        return None
+
     @classmethod
     @abc.abstractmethod
     def param_specs(cls, params: Mapping[str, object]) -> list[ParamSpec]:

@@ -20,6 +20,8 @@ import math
 
 import numpy as np
 
+from holonomic_core import hot_path
+
 
 class TwistLimiter:
     """Per-axis limits on a body twist (vx, vy, wz) applied by uniform scaling.
@@ -44,6 +46,10 @@ class TwistLimiter:
         self._vmax = tuple(self.max_velocity.tolist())
         self._amax = tuple(self.max_acceleration.tolist())
         self._dmax = tuple(self.max_deceleration.tolist())
+        #: the compiled closed forms, or None for the pure-Python path (hot_path)
+        self._hot = hot_path.module()
+        self._limits = np.concatenate((self.max_velocity, self.max_acceleration,
+                                       self.max_deceleration))
 
     def limit_velocity(self, twist: np.ndarray) -> tuple[np.ndarray, float]:
         """Scale ``twist`` so every axis is within its speed limit.
@@ -79,17 +85,25 @@ class TwistLimiter:
         return np.array([p + (g - p) * scale for g, p in zip(tgt, prev)])
 
     def limit(self, target: np.ndarray, previous: np.ndarray, dt: float) -> np.ndarray:
-        """Speed limits, then acceleration limits, on ``target`` given the last output."""
+        """Speed limits, then acceleration limits, on ``target`` given the last output.
+
+        Returns a new array (vx, vy, wz) [m/s, m/s, rad/s]; compiled when
+        :mod:`holonomic_core.hot_path` selects it (the same numbers).
+        """
+        if self._hot is not None:
+            return self._hot.limit_twist(target, previous, dt, self._limits)
         limited, _ = self.limit_velocity(target)
         return self.limit_acceleration(limited, previous, dt)
 
 
-def saturate_joint_rates(rates: np.ndarray, max_rates: np.ndarray) -> tuple[np.ndarray, float]:
+def saturate_joint_rates_pure(rates: np.ndarray,
+                              max_rates: np.ndarray) -> tuple[np.ndarray, float]:
     """Scale all joint ``rates`` [rad/s] by one factor so none exceeds ``max_rates``.
 
-    Returns (scaled rates, scale in (0, 1]). Non-finite rates are a caller
-    bug upstream (the twist is validated first); they give scale 0 and zero
-    rates, never motion.
+    Returns (scaled rates, scale in (0, 1]); ``rates`` itself when nothing
+    is scaled. Non-finite rates are a caller bug upstream (the twist is
+    validated first); they give scale 0 and zero rates, never motion.
+    The pure-Python reference of :func:`saturate_joint_rates`.
     """
     worst = 0.0
     for value, limit in zip(rates.tolist(), max_rates.tolist()):
@@ -102,6 +116,19 @@ def saturate_joint_rates(rates: np.ndarray, max_rates: np.ndarray) -> tuple[np.n
         return rates, 1.0
     scale = 1.0 / worst
     return rates * scale, scale
+
+
+def joint_rate_saturation():
+    """:func:`saturate_joint_rates_pure` or its compiled twin, as
+    :mod:`holonomic_core.hot_path` selects now (a cycle object takes it once,
+    when it is built: a dispatching wrapper's call would cost as much as the
+    compiled arithmetic)."""
+    hot = hot_path.module()
+    return saturate_joint_rates_pure if hot is None else hot.saturate_joint_rates
+
+
+#: the saturation selected when this module was imported
+saturate_joint_rates = joint_rate_saturation()
 
 
 def is_finite_twist(twist) -> bool:

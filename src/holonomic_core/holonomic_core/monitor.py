@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from holonomic_core import hot_path
+
 
 @dataclass(frozen=True)
 class MonitorLimits:
@@ -57,6 +59,10 @@ class ReadingMonitor:
         # per-cycle checks run on Python floats (cheaper than numpy on n <= 16)
         self._bound = (limits.velocity_factor * self.max_velocity).tolist()
         self._tracking_bound = (limits.tracking_error * self.max_velocity).tolist()
+        # the compiled per-joint tests (hot_path); on a failure the loops
+        # below find it again and word the message
+        self._hot = hot_path.module()
+        self._bound_array = limits.velocity_factor * self.max_velocity
         self.reset()
 
     def reset(self) -> None:
@@ -85,6 +91,45 @@ class ReadingMonitor:
             return (f"driver returned {positions.shape[0] if positions.ndim else 0} positions and "
                     f"{velocities.shape[0] if velocities.ndim else 0} velocities for {n} joints")
         pos, vel = positions.tolist(), velocities.tolist()
+        last = self._last_positions
+        dt = None if last is None else reading.stamp - self._last_stamp
+        checked = self._hot is not None and self._hot.reading_plausible(
+            positions, velocities, self._bound_array,
+            last if dt is not None and dt >= 0.0 else None,
+            self._span(dt) if dt is not None and dt >= 0.0 else 0.0)
+        if not checked:
+            problem = self._check_joints(pos, vel, dt)
+            if problem is not None:
+                return problem
+        if last is not None:
+            if dt < 0.0:
+                # the clock restarted (simulation reset): a new reference
+                self._accept(pos, reading.stamp, now)
+                return None
+            if dt == 0.0:
+                frozen = now - self._stamp_changed_at
+                if self.limits.reading_timeout > 0.0 and frozen > self.limits.reading_timeout:
+                    return f"joint readings stopped updating {frozen:.3f} s ago"
+                return None
+        problem = self._check_tracking(vel, now, command)
+        self._accept(pos, reading.stamp, now)
+        return problem
+
+    def _span(self, dt: float) -> float:
+        """The time [s] over which a position may move by bound x span."""
+        # The bound holds over the time between the device's samples,
+        # which the stamps understate when the host stamps samples late:
+        # after a stall of this loop, a sample taken before the stall can
+        # be stamped after it (e.g. a TPDO handled after the next SYNC),
+        # and the next one, a catch-up cycle later, then carries the
+        # whole stall's motion over a fraction of a period. So the span
+        # is at least the period and the longest gap between the last
+        # few checks (a stall widens the bound for STALL_MEMORY cycles).
+        return max(dt, self.period, max(self._gaps, default=0.0))
+
+    def _check_joints(self, pos: list, vel: list, dt: float | None) -> str | None:
+        """The per-joint tests (finite, speed, position jump when ``dt`` >= 0)."""
+        n = len(self.joint_names)
         isfinite = math.isfinite
         for i in range(n):
             if not isfinite(pos[i]):
@@ -97,35 +142,15 @@ class ReadingMonitor:
                 return (f"{self.joint_names[i]}: velocity reading {vel[i]:.4g} rad/s is over "
                         f"{self.limits.velocity_factor:g}x its limit "
                         f"({self.max_velocity[i]:g} rad/s): encoder glitch")
-        if self._last_positions is not None:
-            dt = reading.stamp - self._last_stamp
-            if dt < 0.0:
-                # the clock restarted (simulation reset): a new reference
-                self._accept(pos, reading.stamp, now)
-                return None
-            # The bound holds over the time between the device's samples,
-            # which the stamps understate when the host stamps samples late:
-            # after a stall of this loop, a sample taken before the stall can
-            # be stamped after it (e.g. a TPDO handled after the next SYNC),
-            # and the next one, a catch-up cycle later, then carries the
-            # whole stall's motion over a fraction of a period. So the span
-            # is at least the period and the longest gap between the last
-            # few checks (a stall widens the bound for STALL_MEMORY cycles).
-            span = max(dt, self.period, max(self._gaps, default=0.0))
+        if dt is not None and dt >= 0.0:
+            span = self._span(dt)
             last = self._last_positions
             for i in range(n):
                 jump = abs(pos[i] - last[i])
                 if jump > bound[i] * span + 1e-6:
                     return (f"{self.joint_names[i]}: position jumped by {jump:.4g} rad in "
                             f"{dt:.4g} s: encoder glitch")
-            if dt == 0.0:
-                frozen = now - self._stamp_changed_at
-                if self.limits.reading_timeout > 0.0 and frozen > self.limits.reading_timeout:
-                    return f"joint readings stopped updating {frozen:.3f} s ago"
-                return None
-        problem = self._check_tracking(vel, now, command)
-        self._accept(pos, reading.stamp, now)
-        return problem
+        return None
 
     def _accept(self, positions: list, stamp, now) -> None:
         self._last_positions = positions

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from holonomic_core import hot_path
 from holonomic_core.se2 import compose_arc, wrap_angle
 
 
@@ -92,6 +93,17 @@ class Odometry:
         self.estimator = estimator
         self.noise = noise or OdometryNoise()
         self.twist_window = float(twist_window)
+        # the compiled increment (hot_path) where the kinematics have one for
+        # this estimator; None: the pure-Python arithmetic below
+        hot = hot_path.module()
+        self._hot = hot
+        self._kernel = model.kinematics.hot_path_geometry(estimator) if hot is not None else None
+        n = self.noise
+        self._noise_terms = np.array([n.linear_variance_per_meter, n.angular_variance_per_radian,
+                                      n.angular_variance_per_meter, n.slip_position_gain,
+                                      n.slip_heading_gain], dtype=float)
+        self._twist_terms = np.array(tuple(n.twist_variance) + tuple(n.twist_slip_gain)
+                                     + tuple(n.twist_lag_gain), dtype=float)
         self.reset()
 
     def reset(self, pose=(0.0, 0.0, 0.0)) -> None:
@@ -146,6 +158,10 @@ class Odometry:
         nothing was integrated (first reading, or non-finite positions, which
         are skipped and do not become the reference).
         """
+        if self._kernel is not None and self._last_positions is not None:
+            dt = stamp - self._last_stamp
+            if dt > 0.0:
+                return self._update_compiled(positions, stamp, dt)
         # one reduction: any nan or +-inf makes the sum non-finite
         if not math.isfinite(float(np.add.reduce(positions))):
             return False
@@ -155,9 +171,38 @@ class Odometry:
             self._history.clear()
             self._history.append((stamp, self._last_positions, self.twist))
             return False
+        dt = stamp - self._last_stamp
+        disp = self._increment(positions, dt)
+        self._last_positions = np.array(positions, dtype=float)
+        self._last_stamp = stamp
+        if dt > 0.0:
+            self._update_twist(disp, dt)
+        elif dt < 0.0:
+            # the clock went back: the window's stamps mean nothing any more
+            self._history.clear()
+            self._history.append((stamp, self._last_positions, self.twist))
+        return True
+
+    def _update_compiled(self, positions: np.ndarray, stamp: float, dt: float) -> bool:
+        """:meth:`update` for an increment with dt > 0 on the compiled path:
+        the check, the estimate and :meth:`_integrate` in one call."""
+        kind, geometry = self._kernel
+        step = self._hot.odometry_step(kind, geometry, self._last_positions, positions, dt,
+                                       self.pose, self._P, self._noise_terms)
+        if step is None:            # a non-finite position: skipped, not the reference
+            return False
+        (self.rate_twist, self.residual, disp, self.slip, self._P, dist,
+         self._last_positions) = step
+        self.distance += dist
+        self._last_stamp = stamp
+        self._update_twist(disp, dt)
+        return True
+
+    def _increment(self, positions: np.ndarray, dt: float) -> np.ndarray:
+        """The pure-Python increment: estimate, then compose; returns the
+        body displacement (dx, dy, dtheta) [m, m, rad]."""
         dq = positions - self._last_positions
         mid = self._last_positions + 0.5 * dq
-        dt = stamp - self._last_stamp
         slip2_dt = 0.0
         if dt > 0.0:
             # Fit the mean rates, not the displacement: slip_min and pinv are
@@ -174,15 +219,7 @@ class Odometry:
             # a repeated or backward stamp: no rate, but the motion is real
             disp = self.model.kinematics.forward(mid, dq, self.estimator)
         self._integrate(disp, slip2_dt)
-        self._last_positions = np.array(positions, dtype=float)
-        self._last_stamp = stamp
-        if dt > 0.0:
-            self._update_twist(disp, dt)
-        elif dt < 0.0:
-            # the clock went back: the window's stamps mean nothing any more
-            self._history.clear()
-            self._history.append((stamp, self._last_positions, self.twist))
-        return True
+        return disp
 
     def _update_twist(self, disp: np.ndarray, dt: float) -> None:
         """Line fit through the readings of the last ``twist_window`` s."""
@@ -191,6 +228,15 @@ class Odometry:
         # the readings within the window before this one, at least the last
         while len(history) > 1 and stamp - history[0][0] > self.twist_window + 1e-9:
             history.popleft()
+        if self._kernel is not None:
+            # compiled: the fit, the acceleration and the variances below, one call
+            kind, geometry = self._kernel
+            twist, self._twist_var = self._hot.twist_update(
+                kind, geometry, history, stamp, positions, disp, dt, self._twist_terms,
+                self.slip * self.slip, 0.5 * self.twist_window)
+            history.append((stamp, positions, twist))
+            self.twist = twist
+            return
         if len(history) == 1:
             twist = disp / dt          # the line through two readings
         else:

@@ -46,6 +46,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from holonomic_core import hot_path
 from holonomic_core.kinematics import BaseKinematics
 from holonomic_core.schema import ConfigError, ParamSpec, number_or_none
 from pcv_base.estimators import estimate
@@ -136,6 +137,9 @@ class PoweredCasterKinematics(BaseKinematics):
         self.contact_geometry = tuple((float(c.axis[0]), float(c.axis[1]),
                                        float(c.caster_offset), float(c.wheel_radius))
                                       for c in casters)
+        #: the compiled closed forms (hot_path), None for the pure-Python path
+        self._hot = hot_path.module() if len(casters) <= hot_path.MAX_CASTERS else None
+        self._hot_geometry = np.array(self.contact_geometry, dtype=float).ravel()
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -216,6 +220,8 @@ class PoweredCasterKinematics(BaseKinematics):
         swerve module): phi_dot = n . v(s) / b - wz, rho_dot = e . v(s) / r,
         with v(s) the base's velocity at the steering axis.
         """
+        if self._hot is not None:
+            return self._hot.inverse(hot_path.KIND_PCV, positions, twist, self._hot_geometry)
         q = positions.tolist() if isinstance(positions, np.ndarray) else list(positions)
         vx, vy, wz = float(twist[0]), float(twist[1]), float(twist[2])
         out = []
@@ -246,8 +252,17 @@ class PoweredCasterKinematics(BaseKinematics):
     def estimate(self, positions: np.ndarray, velocities: np.ndarray,
                  estimator: str = "slip_min") -> tuple[np.ndarray, np.ndarray]:
         """Twist and per-caster residual from one fit (see BaseKinematics)."""
+        if self._hot is not None and estimator == "slip_min":
+            return self._hot.estimate(hot_path.KIND_PCV, positions, velocities,
+                                      self._hot_geometry)
         return estimate(self, np.asarray(positions, float), np.asarray(velocities, float),
                         estimator)
+
+    def hot_path_geometry(self, estimator: str = "slip_min") -> tuple[int, np.ndarray] | None:
+        """The compiled form covers the slip_min fit (robust and pinv stay in Python)."""
+        if estimator != "slip_min" or len(self.casters) > hot_path.MAX_CASTERS:
+            return None
+        return hot_path.KIND_PCV, self._hot_geometry
 
     def jacobian(self, positions: np.ndarray) -> np.ndarray:
         """``C# = C_p^+ C_q^-1`` (3 x 2n): the slip-minimising estimator (eq. 13)."""
