@@ -19,6 +19,29 @@ from typing import Callable
 
 import numpy as np
 
+from holonomic_core.realtime import DEFAULT_PRIORITY
+from holonomic_core.schema import ParamSpec
+
+#: where and how the base controller runs its loop (docs/realtime.md)
+LOOP_SPECS: list[ParamSpec] = [
+    ParamSpec("loop.process", "bool",
+              "Run the control loop (driver, controller, simulator) in a process of its own, "
+              "out of the ROS executor's interpreter lock; false: in a thread of the node's "
+              "process (for a driver that cannot leave it, e.g. python-can's in-process "
+              "virtual bus).", default=True),
+    ParamSpec("loop.realtime", "bool",
+              "The loop process requests SCHED_FIFO at loop.priority and locks its memory "
+              "(mlockall); when the system does not permit it, one warning and the loop "
+              "runs without (docs/realtime.md says how to grant it).", default=True),
+    ParamSpec("loop.priority", "int", "SCHED_FIFO priority of the loop process (1-98).",
+              default=DEFAULT_PRIORITY, minimum=1, maximum=98),
+    ParamSpec("loop.watchdog_timeout", "double",
+              "A loop process whose cycles stop for this long is hung: the node kills it "
+              "(the drives' own watchdogs stop the motors; the simulation stops with it) "
+              "and reports an ERROR in diagnostics [s].",
+              default=0.5, minimum=0.01, maximum=60.0),
+]
+
 
 class ManualClock:
     """A clock its owner advances (``now`` [s]): simulated time for running
@@ -91,7 +114,13 @@ class ControlLoop:
         self.stats = LoopStats()
 
     def start(self) -> None:
+        """Run the loop in its own (daemon) thread."""
         self._thread.start()
+
+    def run(self) -> None:
+        """Run the loop in the calling thread until :meth:`stop` (e.g. the
+        main thread of a process of its own, on a real-time priority)."""
+        self._run()
 
     def stop(self, timeout: float = 2.0) -> bool:
         """Stop the loop; returns True if the thread ended within ``timeout``."""
