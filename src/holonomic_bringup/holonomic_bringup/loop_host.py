@@ -186,7 +186,7 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     (0: stopped on request or by SIGTERM; 1: the loop gave up after repeated
     failures; 2: the robots could not be built)."""
     from holonomic_core.loop import ControlLoop
-    from holonomic_core.realtime import request_realtime
+    from holonomic_core.realtime import current_policy, request_realtime
 
     beat = np.frombuffer(heartbeat, dtype=np.int64, count=1)
     built = _build(setup, sock)
@@ -245,7 +245,8 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     def status(r: _Robot) -> None:
         loop = state["loop"]
         wire.send(sock, ("status", r.index, r.controller.status(),
-                         {**loop.stats.summary(), "dropped_records": r.dropped}))
+                         {**loop.stats.summary(), "dropped_records": r.dropped,
+                          "scheduling": state["policy"]}))
 
     def cycle() -> None:
         poll_control()
@@ -292,6 +293,7 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
         warning = request_realtime(int(first.values["loop.priority"]))
         if warning is not None:
             wire.send(sock, ("log", 0, "warn", warning))
+    state["policy"] = current_policy() + ("" if not setup.in_process else " (thread)")
     import gc
     gc.freeze()       # the start-up objects out of the collector's way
     try:
