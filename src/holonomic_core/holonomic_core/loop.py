@@ -64,6 +64,9 @@ class LoopStats:
         self.count = 0
         self.overruns = 0
         self.max_period = 0.0
+        #: periods since start longer than 2 ms and 5 ms (the 1 kHz targets' bounds)
+        self.over_2ms = 0
+        self.over_5ms = 0
 
     def add(self, period: float, compute: float) -> None:
         i = self.count % self.periods.size
@@ -72,15 +75,20 @@ class LoopStats:
         self.count += 1
         if period > self.max_period:
             self.max_period = period
+        if period > 2e-3:
+            self.over_2ms += 1
+            if period > 5e-3:
+                self.over_5ms += 1
 
     def summary(self) -> dict[str, float]:
         """rate [Hz], period p50/p99/max over the window and max since start
-        [ms], compute p99 [ms], overruns since start."""
+        [ms], compute p99 [ms], overruns and periods over 2 ms / 5 ms since start."""
         n = min(self.count, self.periods.size)
         if n == 0:
             return {"rate_hz": 0.0, "period_p50_ms": 0.0, "period_p99_ms": 0.0,
                     "period_window_max_ms": 0.0, "period_max_ms": 0.0,
-                    "compute_p99_ms": 0.0, "overruns": 0}
+                    "compute_p99_ms": 0.0, "overruns": 0, "periods_over_2ms": 0,
+                    "periods_over_5ms": 0}
         periods = self.periods[:n]
         mean = float(np.mean(periods))
         return {"rate_hz": 1.0 / mean if mean > 0 else 0.0,
@@ -89,7 +97,8 @@ class LoopStats:
                 "period_window_max_ms": 1e3 * float(periods.max()),
                 "period_max_ms": 1e3 * self.max_period,
                 "compute_p99_ms": 1e3 * float(np.percentile(self.compute[:n], 99)),
-                "overruns": self.overruns}
+                "overruns": self.overruns, "periods_over_2ms": self.over_2ms,
+                "periods_over_5ms": self.over_5ms}
 
 
 class ControlLoop:
