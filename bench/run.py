@@ -309,15 +309,26 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   every cycle, fresh arrays, numpy clipping), 5000-cycle blocks alternating, medians. "Full
   cycle" is `BaseController.step` with the mock driver: also driver read and write, the
   plausibility checks of every reading, the command timeout.
-- **1 kHz loop**: `holonomic-bringup hamr --driver mock -p control_rate:=1000.0` as its own
-  process; this process publishes `cmd_vel` at 100 Hz and subscribes `odom`. The loop's period
-  statistics come from its own diagnostics (1 Hz, each over the last 2000 cycles, overlapping
-  and covering the measurement); start-up is not measured.
+- **1 kHz loop** (`python bench/run.py --only loop` re-runs these rows and the latency):
+  `holonomic-bringup hamr --driver mock` and `holonomic-bringup xr4000 --driver sim -p
+  control_mode:=torque` with `-p control_rate:=1000.0 -p publish_rate:=1000.0`, each once with
+  `-p loop.realtime:=false` and once with the default (SCHED_FIFO 50 and mlockall where
+  permitted; the row names the policy the loop got), 60 s each, as their own processes; this
+  process publishes `cmd_vel` at 100 Hz and subscribes `odom` and `joint_states`. The loop's
+  own period statistics come from its diagnostics (the loop process's cycle timestamps; 1 Hz,
+  each over the last 2000 cycles, overlapping and covering the measurement; periods over 2 ms
+  and 5 ms counted by the loop); start-up is not measured. From outside: the periods between
+  consecutive `joint_states` stamps (the cycle's driver reading; for the mock on the monotonic
+  clock, for the simulator simulated time, so only the mock's say anything) and between their
+  arrivals here (DDS and this subscriber included). A received rate below 1000/s means the
+  node or this subscriber did not keep up with three 1 kHz topics.
 - **Command latency**: a base controller node (1 kHz, mock driver, `cmd_vel_stamped`,
-  acceleration limits out of the way) in this process, instrumented to timestamp the write of
-  the first joint command computed from each `TwistStamped`; the publisher is another process
-  stamping each message with the system clock; a plain subscriber in this process gives DDS's
-  one-way latency for the same messages.
+  acceleration limits out of the way, its loop in its own process) in this process; the
+  node's public state-record hook (`node.link.on_record`, every cycle) times the first cycle
+  whose commanded twist is each `TwistStamped`'s, at that cycle's driver reading (its joint
+  command is written tens of µs later); the publisher is another process stamping each
+  message with the system clock; a plain subscriber in this process gives DDS's one-way
+  latency for the same messages.
 - **Simulation speed**: `BaseController` + `sim` driver stepped as fast as possible (1 kHz
   physics, 200 Hz control, a constant twist), against raw pybullet: the time the
   `pybullet.stepSimulation` calls of the same run take alone (each timed); once with ideal

@@ -60,7 +60,9 @@ def run_fleet(robot: str, count: int, params: list[str], enable: bool,
     except ConfigError as exc:
         print(f"holonomic-bringup: {exc}", file=sys.stderr)
         return 2
-    rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
+    # not sys.argv: its -p NAME:=VALUE are for the nodes (rcl would read them as
+    # deprecated remap rules)
+    rclpy.init(args=["holonomic-bringup"], signal_handler_options=SignalHandlerOptions.NO)
     return run_robots(
         fleet_arguments(path, count, params, enable), record=record, foxglove=foxglove,
         prog="holonomic-bringup", shared_world=True,

@@ -112,7 +112,9 @@ class _Robot:
         r[lay.velocities] = reading.velocities
         r[lay.efforts] = reading.efforts
         if lay.units:
-            r[lay.residual] = odo.residual
+            residual = odo.residual
+            # no fit yet (before the second reading): no residual
+            r[lay.residual] = residual if len(residual) == lay.units else np.nan
         r[lay.state] = self._states[c.state]
         r[lay.stale] = c.stale
         r[lay.saturation] = c.saturation
@@ -248,14 +250,28 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
                          {**loop.stats.summary(), "dropped_records": r.dropped,
                           "scheduling": state["policy"]}))
 
+    def robot_cycle(r: _Robot) -> None:
+        r.cycle += 1
+        r.drain_commands()
+        r.controller.step()
+        if r.pending:
+            answer(r)
+        if r.controller.reading is not None:
+            flags = wire.PUBLISH if r.cycle % r.publish_every == 0 else 0
+            if r.clock_every and r.cycle % r.clock_every == 0:
+                flags |= wire.CLOCK
+            if flags:
+                r.write_record(flags)
+        if r.cycle % r.diag_every == 0:
+            status(r)
+
     def cycle() -> None:
         poll_control()
         if world is not None:
             world.step(substeps)
         for r in robots:
-            r.drain_commands()
             try:
-                r.controller.step()
+                robot_cycle(r)
                 r.errors = 0
             except Exception as exc:            # this robot stops; the others go on
                 r.errors += 1
@@ -265,17 +281,6 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
                 if r.errors >= MAX_CONSECUTIVE_ERRORS and len(robots) == 1:
                     state["give_up"] = True
                     state["loop"].stop(timeout=0.0)
-            r.cycle += 1
-            if r.pending:
-                answer(r)
-            if r.controller.reading is not None:
-                flags = wire.PUBLISH if r.cycle % r.publish_every == 0 else 0
-                if r.clock_every and r.cycle % r.clock_every == 0:
-                    flags |= wire.CLOCK
-                if flags:
-                    r.write_record(flags)
-            if r.cycle % r.diag_every == 0:
-                status(r)
         beat[0] += 1
 
     def on_error(exc: BaseException) -> bool:    # the world's step failed
@@ -283,6 +288,7 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
                                             "stopping the motors"))
         for r in robots:
             r.controller.raise_fault(f"internal error: {exc!r}")
+        state["give_up"] = True
         return False
 
     loop = ControlLoop(1.0 / rate, cycle, on_error=on_error, name="control_loop")
