@@ -414,7 +414,8 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
 
 
 def memory_growth(seconds: float = 240.0, robot: str = "hamr") -> dict:
-    """RSS [MB] of a simulated ``holonomic-bringup`` driven the whole time
+    """RSS [MB] of a simulated ``holonomic-bringup`` (node and loop process)
+    driven the whole time
     (cmd_vel at 20 Hz, turning so it stays in place), sampled every 10 s;
     growth after the first minute."""
     import rclpy
@@ -427,11 +428,17 @@ def memory_growth(seconds: float = 240.0, robot: str = "hamr") -> dict:
     samples = []
 
     def rss_mb() -> float:
-        # the wrapper execs python: the PID is the program's
-        for line in Path(f"/proc/{proc.pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-        raise RuntimeError("no VmRSS")
+        # the wrapper execs python: the PID is the program's; its children
+        # (the control loop process) count too
+        pids = [proc.pid]
+        for task in Path(f"/proc/{proc.pid}/task").iterdir():
+            pids += [int(p) for p in (task / "children").read_text().split()]
+        total = 0.0
+        for pid in pids:
+            for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1]) / 1024.0
+        return total
 
     try:
         time.sleep(5.0)

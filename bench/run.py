@@ -339,7 +339,7 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
 - **Fleet**: N robots in one world, a `BaseController` each, one loop (the `--fleet` runner's
   cycle), no ROS.
 - **Memory**: `holonomic-bringup hamr --enable` (simulator) driven by `cmd_vel` at 20 Hz for the
-  whole run; RSS from `/proc` every 10 s.
+  whole run; RSS of the node and its loop process from `/proc` every 10 s.
 - **Foxglove bridge**: `holonomic-bringup hamr -p control_rate:=1000.0` (simulator) driven as
   the 1 kHz row, in alternating blocks without and with `--foxglove PORT`; with it, a
   `websockets` client in this process subscribes to every channel and reads everything (what
