@@ -207,3 +207,38 @@ def test_the_loop_process_scheduling_is_reported_and_can_be_turned_off(ros, star
             assert proc.log().count("real-time scheduling unavailable") <= 1
         else:
             assert policy == "SCHED_OTHER 0" and not refused
+
+
+def _get_parameter(ros, node: str, name: str):
+    from rcl_interfaces.srv import GetParameters
+
+    client = ros.create_client(GetParameters, f"{node}/get_parameters")
+    try:
+        assert client.wait_for_service(timeout_sec=10.0)
+        future = client.call_async(GetParameters.Request(names=[name]))
+        wait_until(future.done, 10.0, f"{node}'s parameters")
+        return future.result().values[0].double_value
+    finally:
+        ros.destroy_client(client)
+
+
+def test_a_fleet_runs_in_one_loop_process_with_its_overrides_parsed_by_rclpy(ros, start_bringup):
+    # -p goes through rclpy for every robot, as for one robot
+    fleet = start_bringup("hamr", "--fleet", "2", "-p", "cmd_timeout:=1.5")
+    probes = [Probe(ros, f"robot{k}") for k in (1, 2)]
+    try:
+        for probe in probes:
+            probe.wait_ready()
+        pid = _loop_pid(fleet)
+        children = [int(p) for task in Path(f"/proc/{fleet.proc.pid}/task").iterdir()
+                    for p in (task / "children").read_text().split()]
+        assert children == [pid]          # one world, one loop, one process
+        for k in (1, 2):
+            assert _get_parameter(ros, f"/robot{k}/base_controller", "cmd_timeout") == 1.5
+        # the first robot alone publishes the simulated clock
+        assert ros.count_publishers("/clock") == 1
+    finally:
+        for probe in probes:
+            probe.close()
+    assert fleet.stop() == 0
+    assert _gone(pid)

@@ -1,14 +1,18 @@
 """The base controller node: a thin ROS shell around holonomic_core.
 
-Parameters -> a validated RobotConfig -> driver + BaseController; messages in
--> ``BaseController.set_command``; the control loop thread runs
-``BaseController.step`` at ``control_rate`` and publishes odometry, /tf,
-joint states, diagnostics (and, with the simulator, ground truth and /clock)
-from the same thread, decimated to ``publish_rate`` / 1 Hz. The robot's URDF
+Parameters -> a validated RobotConfig; the driver and the BaseController run
+in the robot's control loop process (:mod:`loop_host`, docs/realtime.md),
+which this node starts through a :class:`~loop_client.LoopClient`. Messages
+in -> the loop's command pipe and request socket; the loop's state records
+(every ``publish_rate`` cycle) -> odometry, /tf, joint states (and, with the
+simulator, ground truth and /clock), published from the client's reader
+thread; its status (``BaseController.status``, once a second) ->
+diagnostics. A loop that ends or hangs is reported as an ERROR. The robot's URDF
 (the one the simulator is built from) is latched on ``robot_description``;
 with ``publish_link_tf`` every link's transform (from the measured joint
 positions) goes on /tf too. :meth:`BaseControllerNode.attach_foxglove` hands
-the same state to a Foxglove bridge (``--foxglove``).
+the same state to a Foxglove bridge (``--foxglove``). :func:`run_robots` is
+the one runner of ``holonomic-bringup``, for a robot and for ``--fleet``.
 
 The robot's YAML is named by the ``robot_config`` parameter (a config name or
 a path); every key of it can be overridden with ROS parameters
