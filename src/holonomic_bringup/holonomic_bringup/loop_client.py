@@ -76,7 +76,9 @@ class RobotLink:
     def request_reset_odometry(self) -> concurrent.futures.Future:
         return self.client.request(("reset_odometry", self.index))
 
-    def _read_records(self) -> None:
+    def read_records(self) -> None:
+        """Read what the state pipe holds; ``on_record`` each whole record
+        (the client's reader thread)."""
         try:
             data = os.read(self.state_fd, _PIPE_SIZE)
         except BlockingIOError:
@@ -241,7 +243,7 @@ class LoopClient:
             events = sel.select(0.05)
             for key, _ in events:
                 if key.data is not None:
-                    key.data._read_records()
+                    key.data.read_records()
                 elif not self._on_control():
                     if self._stopping:
                         sel.close()
