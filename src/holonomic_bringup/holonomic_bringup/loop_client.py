@@ -100,7 +100,7 @@ class LoopClient:
     of its own (``process``) or a thread; see the module docstring."""
 
     def __init__(self, setups: list[tuple[dict, str, object]], process: bool = True,
-                 shared_world: bool = False, watchdog_timeout: float = 0.5):
+                 shared_world: bool = False, watchdog_timeout: float = 2.0):
         """``setups``: per robot ``(flat, source, model)``, the model for
         the record layout."""
         self.process = process
