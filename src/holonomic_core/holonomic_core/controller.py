@@ -36,8 +36,8 @@ from holonomic_core.driver import (DRIVER_REGISTRY, Driver, DriverError, DriverF
                                    DriverState, JointReading, driver_class,
                                    sim_drives_driver)
 from holonomic_core.kinematics import ESTIMATORS
-from holonomic_core.loop import LOOP_SPECS
 from holonomic_core.limits import TwistLimiter, is_finite_twist, saturate_joint_rates
+from holonomic_core.loop import LOOP_SPECS
 from holonomic_core.model import (RobotModel, build_model, check_no_unknown, read_params_file,
                                   resolve_config)
 from holonomic_core.monitor import MonitorLimits, ReadingMonitor
