@@ -190,7 +190,12 @@ def format_table(r: dict) -> str:
                    f"stamps p99 {st['p99_ms']:.3f} ms, max {st['max_ms']:.2f} ms, > 2 ms: "
                    f"{st['over_2ms']}, > 5 ms: {st['over_5ms']}; arrivals p99 "
                    f"{ar['p99_ms']:.3f} ms, max {ar['max_ms']:.2f} ms")
-        worst = lp["period_max_ms"]       # the loop's own: the targets are the loop's
+        # the loop's own counts over the measurement decide "none later than";
+        # the windows' max can reach up to 2 s before it (a window spans 2000 cycles)
+        if "periods_over_2ms" in lp:
+            none_later = lp["periods_over_2ms" if rt else "periods_over_5ms"] == 0
+        else:
+            none_later = lp["period_max_ms"] <= limit_max
         rows.append(
             f"| 1 kHz loop, {lp['what']}, "
             + ("" if rt is None else f"real-time {'on' if rt else 'off'} "
@@ -199,10 +204,11 @@ def format_table(r: dict) -> str:
             f"{lp['seconds']:.0f} s | {lp['rate_hz']:.1f} Hz; loop's own period "
             f"p50 {lp['period_p50_ms']:.3f} ms, p99 {lp['period_p99_ms_median_window']:.3f} ms "
             f"(median of {lp['windows']} 2-s windows; worst window "
-            f"{lp['period_p99_ms_worst_window']:.3f} ms), max {lp['period_max_ms']:.2f} ms, "
+            f"{lp['period_p99_ms_worst_window']:.3f} ms), max {lp['period_max_ms']:.2f} ms "
+            f"(the windows'), "
             f"{lp['overruns']} overruns{over}{out} | p99 ≤ {limit_p99} ms, none later than "
             f"{limit_max:g} ms | {verdict(lp['period_p99_ms_worst_window'] <= limit_p99)} (p99), "
-            f"{verdict(worst <= limit_max)} (max) |")
+            f"{verdict(none_later)} (max) |")
     la = r["latency"]
     rows.append(
         f"| command latency, TwistStamped from another process → the control cycle using it, "
@@ -280,15 +286,24 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   this CPU -- and the baseline is itself numpy calls of a few µs each, so the ratio stays near
   2.5-3.5× (the ≤ 30 µs for four casters is met with room). A 5× margin needs the cycle out of
   the interpreter: the same closed forms in a small C extension or numba (not tried here).
-- **1 kHz loop: p99 ≤ 1.1 ms and nothing later than 5 ms.** The loop thread sleeps to absolute
-  deadlines and busy-waits the last 0.2 ms, but it shares the GIL with the executor thread
-  (callbacks, publishing) and two cores with the DDS threads and the traffic generator: about
-  one cycle in a hundred starts 0.3-0.8 ms late, and every few seconds one is delayed by several
-  milliseconds (not the garbage collector: the node freezes its start-up objects and a full
-  collection then takes 0.05 ms). At 200 Hz, the product's default rate, the same jitter is a
-  small fraction of the period. Holding 1 kHz hard needs the loop outside the GIL -- a real-time
-  thread (SCHED_FIFO, which needs CAP_SYS_NICE) in a compiled process (ros2_control's
-  controller_manager is the usual answer) -- not more Python tuning.
+- **1 kHz loop** (docs/realtime.md). The loop now runs in a process of its own (the driver,
+  the controller and the simulator; the ROS node is a shell), so it no longer shares the
+  interpreter lock with the executor. With SCHED_FIFO it holds 1 kHz on the mock driver
+  (p99 1.001 ms) even on the 2-core machine at load 10-16 from other work (these rows were
+  measured so, niced: indicative; the lead re-measures idle). What remains:
+  * *without real-time priority* the loop is an ordinary process among everything else on
+    two cores: at that load it got 73 % of its cycles (HAMR) and 18 % (XR4000 with 1 kHz
+    physics); on an idle machine it is the executor-free loop of the design, but no
+    guarantee;
+  * *with SCHED_FIFO* on a standard (not PREEMPT_RT) kernel, in a VM: a few periods over
+    2 ms a minute (the hypervisor and the kernel's non-preemptible sections, not our code:
+    the loop's compute p99 is tens of µs); the XR4000 in torque mode also steps 1 kHz
+    physics of four casters in the same cycle (0.4-0.6 ms), leaving little room: its p99
+    1.16 ms and 17 periods over 5 ms under that load;
+  * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz from Python,
+    ~0.2-0.3 ms a record; on the loaded machine the node (an ordinary process) fell behind
+    and the bench's own subscriber too (570-716 of 1000 joint_states a second received),
+    so the outside periods there measure the publishing path, not the loop.
 - **Simulation speed with the drive model ≥ 60 % of raw pybullet (HAMR).** The drive model
   makes the physics itself cheaper (joint torques and weak friction motors instead of
   pybullet's stiff velocity motors: raw stepping of the HAMR ran 1.6-2× as fast as with ideal
