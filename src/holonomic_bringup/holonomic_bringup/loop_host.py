@@ -34,7 +34,7 @@ import pickle
 import signal
 import socket
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -57,12 +57,13 @@ class RobotSetup:
 
 @dataclass
 class HostSetup:
-    """What the host runs: robots, and for a fleet one shared world."""
+    """What the host runs: robots, for a fleet one shared world
+    (``shared_world``), and whether it runs in the node's process
+    (``in_process``: no real-time request, it would apply to the node)."""
 
     robots: list[RobotSetup]
     shared_world: bool = False
     in_process: bool = False
-    extra: dict = field(default_factory=dict)
 
 
 class _Robot:
