@@ -143,9 +143,9 @@ class BaseControllerNode(Node):
         try:
             self._configure()
             if start_loop:
-                ctrl = self.config.values
-                self.loop = LoopClient([self.loop_setup()], process=ctrl["loop.process"],
-                                       watchdog_timeout=ctrl["loop.watchdog_timeout"])
+                values = self.config.values
+                self.loop = LoopClient([self.loop_setup()], process=values["loop.process"],
+                                       watchdog_timeout=values["loop.watchdog_timeout"])
                 self.loop.start()
                 self.attach(self.loop.links[0])
         except BaseException:
