@@ -76,15 +76,15 @@ class RobotLink:
     def request_reset_odometry(self) -> concurrent.futures.Future:
         return self.client.request(("reset_odometry", self.index))
 
-    def read_records(self) -> None:
+    def read_records(self) -> bool:
         """Read what the state pipe holds; ``on_record`` each whole record
-        (the client's reader thread)."""
+        (the client's reader thread). False at the pipe's end (the loop is gone)."""
         try:
             data = os.read(self.state_fd, _PIPE_SIZE)
         except BlockingIOError:
-            return
+            return True
         if not data:
-            return
+            return False
         data = self._buffer + data
         size = self.layout.nbytes
         whole = len(data) // size * size
@@ -93,6 +93,7 @@ class RobotLink:
             block = np.frombuffer(data[:whole], dtype=np.float64).reshape(-1, self.layout.size)
             for row in block:
                 self.on_record(wire.StateRecord(row, self.layout))
+        return True
 
 
 class LoopClient:
@@ -243,7 +244,8 @@ class LoopClient:
             events = sel.select(0.05)
             for key, _ in events:
                 if key.data is not None:
-                    key.data.read_records()
+                    if not key.data.read_records():
+                        sel.unregister(key.fd)      # its end closed: no busy select
                 elif not self._on_control():
                     if self._stopping:
                         sel.close()
