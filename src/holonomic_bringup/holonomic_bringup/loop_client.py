@@ -250,6 +250,9 @@ class LoopClient:
                     if self._stopping:
                         sel.close()
                         return
+                    # its socket closes while the process is still exiting:
+                    # wait for the exit status to say how it ended
+                    self._wait_host(1.0)
                     self._declare_lost(f"the control loop ended{self._exit_text()}")
                     sel.unregister(self._sock)
             now = time.monotonic()
