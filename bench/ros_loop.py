@@ -73,34 +73,87 @@ def loop_at_1khz(seconds: float = 60.0, robot: str = "hamr") -> dict:
             **_measure_loop([robot, "--driver", "mock"], "bench_loop", "loop", seconds)}
 
 
+#: the 1 kHz rows of issue 24: robot, bringup arguments, what it is
+LOOP_1KHZ_CASES = (
+    ("hamr", ["hamr", "--driver", "mock"], "hamr, mock driver"),
+    ("xr4000_torque", ["xr4000", "--driver", "sim", "-p", "control_mode:=torque",
+                       "-p", "sim.physics_rate:=1000.0"],
+     "xr4000, torque mode, simulator (1 kHz physics in the loop process)"),
+)
+
+
+def loop_1khz_rows(seconds: float = 60.0) -> list[dict]:
+    """Every case of LOOP_1KHZ_CASES at 1 kHz with odom, joint_states and
+    /tf published every cycle (publish_rate 1000) and cmd_vel at 100 Hz in,
+    ``seconds`` each, without and with real-time scheduling
+    (``loop.realtime``). Period statistics from the loop process's own cycle
+    timestamps (its diagnostics) and from outside (the joint_states this
+    process receives: their stamps -- the cycle's driver reading, for the
+    mock on the monotonic clock -- and their arrival times)."""
+    rows = []
+    for key, args, what in LOOP_1KHZ_CASES:
+        for realtime in (False, True):
+            ns = f"bench_{key}_rt{int(realtime)}"
+            # a loop starved for seconds on a loaded machine is measured, not killed
+            result = _measure_loop(
+                [*args, "-p", f"loop.realtime:={str(realtime).lower()}",
+                 "-p", "loop.watchdog_timeout:=30.0"], ns,
+                f"{key}_rt{int(realtime)}", seconds, publish_rate=1000.0, outside=True)
+            rows.append({"case": key, "what": what, "realtime": realtime, **result})
+    return rows
+
+
+def _period_stats(times: np.ndarray) -> dict:
+    """p50, p99, max [ms] and counts over 2 ms / 5 ms of the periods between
+    consecutive ``times`` [s]."""
+    periods = np.diff(np.sort(times)) * 1e3
+    if periods.size == 0:
+        return {"count": 0}
+    return {"count": int(periods.size), "p50_ms": float(np.percentile(periods, 50)),
+            "p99_ms": float(np.percentile(periods, 99)), "max_ms": float(periods.max()),
+            "over_2ms": int(np.sum(periods > 2.0)), "over_5ms": int(np.sum(periods > 5.0))}
+
+
 def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
-                  started=None) -> dict:
+                  started=None, publish_rate: float = 50.0, outside: bool = False) -> dict:
     """The loop statistics of ``holonomic-bringup ARGS --enable`` at 1 kHz in
     namespace ``ns``, driven by cmd_vel at 100 Hz for ``seconds``.
     ``started(proc)``: called once the robot publishes, before measuring;
-    it returns a function called after the measurement (or None)."""
+    it returns a function called after the measurement (or None).
+    ``outside``: also the periods of the joint_states received here."""
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import JointState
 
     proc, log = _start_bringup([*args, "--enable", "--namespace", ns,
-                                "-p", "control_rate:=1000.0", "-p", "publish_rate:=50.0"], name)
+                                "-p", "control_rate:=1000.0",
+                                "-p", f"publish_rate:={publish_rate}"], name)
     node = rclpy.create_node(f"{ns}_client")
     after = None
     windows, odom_count = [], [0]
     latest = {}
+    joint_stamps, joint_arrivals = [], []
+    measuring = [False]
 
     def on_diag(msg):
         for status in msg.status:
-            if status.name.endswith("control loop"):
+            if status.name.endswith("control loop") and status.level != DiagnosticStatus.ERROR:
                 values = {kv.key: kv.value for kv in status.values}
                 latest.update(values)
                 windows.append(values)
 
+    def on_joints(msg):
+        if measuring[0]:
+            joint_arrivals.append(time.monotonic())
+            joint_stamps.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+
     node.create_subscription(DiagnosticArray, f"/{ns}/diagnostics", on_diag, 10)
     node.create_subscription(Odometry, f"/{ns}/odom",
                              lambda m: odom_count.__setitem__(0, odom_count[0] + 1), 100)
+    if outside:
+        node.create_subscription(JointState, f"/{ns}/joint_states", on_joints, 1000)
     pub = node.create_publisher(Twist, f"/{ns}/cmd_vel", 10)
     finish = _spin([node])
     try:
@@ -113,7 +166,10 @@ def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
             after = started(proc)
         windows.clear()
         overruns_before = int(latest["overruns"])
+        over_before = (int(latest.get("periods_over_2ms", 0)),
+                       int(latest.get("periods_over_5ms", 0)))
         odom_count[0] = 0
+        measuring[0] = True
         msg = Twist()
         t0 = time.monotonic()
         k = 0
@@ -125,6 +181,7 @@ def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
             k += 1
             time.sleep(max(0.0, t0 + k / 100.0 - time.monotonic()))
         elapsed = time.monotonic() - t0
+        measuring[0] = False
         time.sleep(1.2)              # one more diagnostics message
     finally:
         if after is not None:
@@ -134,18 +191,29 @@ def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
         _stop_bringup(proc, log)
     p99 = [float(w["period_p99_ms"]) for w in windows]
     p50 = [float(w["period_p50_ms"]) for w in windows]
-    return {"seconds": seconds, "windows": len(windows),
-            "rate_hz": float(np.median([float(w["rate_hz"]) for w in windows])),
-            "period_p50_ms": float(np.median(p50)),
-            "period_p99_ms_worst_window": max(p99),
-            "period_p99_ms_median_window": float(np.median(p99)),
-            # the worst period inside the measurement (each window's own max;
-            # the windows overlap and cover it); the start-up is not measured
-            "period_max_ms": max(float(w["period_window_max_ms"]) for w in windows),
-            "period_max_since_start_ms": float(latest["period_max_ms"]),
-            "overruns": int(latest["overruns"]) - overruns_before,
-            "odom_hz": odom_count[0] / elapsed,
-            "cmd_hz": k / elapsed}
+    result = {
+        "seconds": seconds, "windows": len(windows),
+        "rate_hz": float(np.median([float(w["rate_hz"]) for w in windows])),
+        "period_p50_ms": float(np.median(p50)),
+        "period_p99_ms_worst_window": max(p99),
+        "period_p99_ms_median_window": float(np.median(p99)),
+        # the worst period inside the measurement (each window's own max;
+        # the windows overlap and cover it); the start-up is not measured
+        "period_max_ms": max(float(w["period_window_max_ms"]) for w in windows),
+        "period_max_since_start_ms": float(latest["period_max_ms"]),
+        "overruns": int(latest["overruns"]) - overruns_before,
+        "odom_hz": odom_count[0] / elapsed,
+        "cmd_hz": k / elapsed,
+        "scheduling": latest.get("scheduling", "thread"),
+    }
+    if "periods_over_2ms" in latest:
+        result["periods_over_2ms"] = int(latest["periods_over_2ms"]) - over_before[0]
+        result["periods_over_5ms"] = int(latest["periods_over_5ms"]) - over_before[1]
+    if outside:
+        result["outside_stamps"] = _period_stats(np.array(joint_stamps))
+        result["outside_arrivals"] = _period_stats(np.array(joint_arrivals))
+        result["joint_states_hz"] = len(joint_stamps) / elapsed
+    return result
 
 
 def _foxglove_watcher(port: int):
@@ -277,10 +345,16 @@ rclpy.shutdown()
 
 
 def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr") -> dict:
-    """TwistStamped from another process -> joint command written to the
-    driver (a 1 kHz base controller node, mock driver, in this process),
-    against the DDS one-way latency of the same messages to a plain
-    subscriber in this process. Percentiles in ms."""
+    """TwistStamped from another process -> the control cycle that uses it
+    (a 1 kHz base controller node in this process, its loop in its own
+    process, mock driver), against the DDS one-way latency of the same
+    messages to a plain subscriber in this process. Percentiles in ms.
+
+    The cycle is seen through the node's public state-record hook
+    (``node.link.on_record``, every cycle at publish_rate 1000): the first
+    cycle whose commanded twist is the message's, timed at that cycle's
+    driver reading (monotonic clock), which precedes its joint command
+    write by the cycle's compute (tens of µs)."""
     import rclpy
     from geometry_msgs.msg import TwistStamped
     from rclpy.parameter import Parameter
@@ -289,7 +363,8 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
 
     ns = "bench_latency"
     params = [Parameter("robot_config", value=robot), Parameter("driver", value="mock"),
-              Parameter("control_rate", value=1000.0), Parameter("cmd_vel_stamped", value=True),
+              Parameter("control_rate", value=1000.0), Parameter("publish_rate", value=1000.0),
+              Parameter("cmd_vel_stamped", value=True),
               Parameter("enable_on_start", value=True), Parameter("cmd_timeout", value=0.0)]
     for axis in ("linear.x", "linear.y", "angular.z"):
         # the limiter passes each command through in one cycle: the latency
@@ -297,40 +372,21 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
         params += [Parameter(f"limits.{axis}.max_acceleration", value=1000.0),
                    Parameter(f"limits.{axis}.max_deceleration", value=1000.0)]
     node = BaseControllerNode(namespace=ns, parameter_overrides=params)
-    # as base_controller_node.main() sets up its process
-    sys.setswitchinterval(min(5e-4, 0.2 * node.loop.period))
     gc.freeze()
-    ctrl = node.controller
-    used = {"vx": None}
     written: dict[float, float] = {}
     arrived: dict[float, float] = {}
     stamps: dict[float, float] = {}
+    link = node.link
+    publish = link.on_record
 
-    # Instrumentation: which command a cycle used, and when its joint rates
-    # reached the driver.
-    original_target, original_write = ctrl._target, ctrl.driver.write_velocities
-
-    def target():
-        twist = original_target()
-        used["vx"] = round(float(twist[0]), 9)
-        return twist
-
-    def write(rates):
-        original_write(rates)
-        vx = used["vx"]
+    def on_record(record):
+        vx = round(float(record.twist_command[0]), 9)
         if vx and vx not in written:
-            written[vx] = time.time()
+            # the cycle's reading on the wall clock
+            written[vx] = time.time() - (time.monotonic() - record.stamp)
+        publish(record)
 
-    received: dict[float, float] = {}
-    original_set = ctrl.set_command
-
-    def set_command(twist, when=None):
-        received.setdefault(round(float(twist[0]), 9), time.time())
-        return original_set(twist, when)
-
-    ctrl._target = target
-    ctrl.driver.write_velocities = write
-    ctrl.set_command = set_command
+    link.on_record = on_record
     plain = rclpy.create_node("bench_latency_plain")
 
     def on_plain(msg):
@@ -350,19 +406,18 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
         node.shutdown()
         node.destroy_node()
         plain.destroy_node()
-    both = [vx for vx in stamps if vx in written and vx in received]
+    both = [vx for vx in stamps if vx in written]
     dds = np.array([arrived[vx] - stamps[vx] for vx in both]) * 1e3
-    node_rx = np.array([received[vx] - stamps[vx] for vx in both]) * 1e3
     e2e = np.array([written[vx] - stamps[vx] for vx in both]) * 1e3
     return {"robot": robot, "commands": count, "matched": len(both),
             "dds_p50_ms": float(np.percentile(dds, 50)), "dds_p99_ms": float(np.percentile(dds, 99)),
-            "node_rx_p50_ms": float(np.percentile(node_rx, 50)),
             "e2e_p50_ms": float(np.percentile(e2e, 50)), "e2e_p99_ms": float(np.percentile(e2e, 99)),
             "ratio_p50": float(np.percentile(e2e, 50) / np.percentile(dds, 50))}
 
 
 def memory_growth(seconds: float = 240.0, robot: str = "hamr") -> dict:
-    """RSS [MB] of a simulated ``holonomic-bringup`` driven the whole time
+    """RSS [MB] of a simulated ``holonomic-bringup`` (node and loop process)
+    driven the whole time
     (cmd_vel at 20 Hz, turning so it stays in place), sampled every 10 s;
     growth after the first minute."""
     import rclpy
@@ -375,11 +430,17 @@ def memory_growth(seconds: float = 240.0, robot: str = "hamr") -> dict:
     samples = []
 
     def rss_mb() -> float:
-        # the wrapper execs python: the PID is the program's
-        for line in Path(f"/proc/{proc.pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-        raise RuntimeError("no VmRSS")
+        # the wrapper execs python: the PID is the program's; its children
+        # (the control loop process) count too
+        pids = [proc.pid]
+        for task in Path(f"/proc/{proc.pid}/task").iterdir():
+            pids += [int(p) for p in (task / "children").read_text().split()]
+        total = 0.0
+        for pid in pids:
+            for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1]) / 1024.0
+        return total
 
     try:
         time.sleep(5.0)

@@ -70,10 +70,10 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
     parser.add_argument("--render", type=Path, metavar="JSON",
                         help="only rewrite the page from a previous run's results")
-    parser.add_argument("--only", choices=("sim", "compute"),
+    parser.add_argument("--only", choices=("sim", "compute", "loop"),
                         help="re-run only the simulation-speed rows (ideal motors and drive "
-                             "model) or the control-cycle compute rows; the page keeps the "
-                             "last run's others")
+                             "model), the control-cycle compute rows, or the 1 kHz loop and "
+                             "command latency rows; the page keeps the last run's others")
     args = parser.parse_args(argv)
     if args.only:
         saved = json.loads(args.out.with_suffix(".json").read_text())
@@ -81,8 +81,10 @@ def main(argv=None) -> int:
         if args.only == "sim":
             saved["results"]["sim"] = sim_rows(_step, args.quick)
             saved["results"]["sim_drive"] = sim_drive_rows(_step, args.quick)
-        else:
+        elif args.only == "compute":
             saved["results"]["compute"] = compute_rows(_step, args.quick)
+        else:
+            saved["results"].update(loop_rows(_step, args.quick))
         saved.setdefault("reruns", {})[args.only] = (
             datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
             + f" on: {machine()}")
@@ -115,9 +117,7 @@ def main(argv=None) -> int:
     import rclpy
     rclpy.init()
     try:
-        results["loop"] = step("1 kHz loop", ros_loop.loop_at_1khz, 15.0 if quick else 60.0)
-        results["latency"] = step("command latency", ros_loop.command_latency,
-                                  1000 if quick else 5000)
+        results.update(loop_rows(step, quick, init=False))
         results["memory"] = step("memory", ros_loop.memory_growth, 75.0 if quick else 240.0)
         results["foxglove"] = step("foxglove bridge cost", ros_loop.foxglove_cost,
                                    10.0 if quick else 30.0, 1 if quick else 2)
@@ -139,6 +139,23 @@ def compute_rows(step, quick: bool) -> list[dict]:
     cycles = 20_000 if quick else 100_000
     return [step(f"cycle compute {r}", compute.cycle_compute, r, cycles)
             for r in ("hamr", "xr4000")]
+
+
+def loop_rows(step, quick: bool, init: bool = True) -> dict:
+    """The 1 kHz loop rows (hamr; xr4000 in torque mode; without and with
+    real-time scheduling) and the command latency."""
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "97")
+    import rclpy
+    if init:
+        rclpy.init()
+    try:
+        return {"loop_1khz": step("1 kHz loop", ros_loop.loop_1khz_rows, 15.0 if quick else 60.0),
+                "latency": step("command latency", ros_loop.command_latency,
+                                1000 if quick else 5000)}
+    finally:
+        if init:
+            rclpy.try_shutdown()
 
 
 def sim_rows(step, quick: bool) -> list[dict]:
@@ -173,21 +190,45 @@ def format_table(r: dict) -> str:
             + verdict(c["speedup"] >= 5.0 and (c["joints"] <= 3 or c["compute_us"] <= 30.0))
             + (f" (≤ 30 µs met)" if c["joints"] > 3 and c["compute_us"] <= 30.0
                and c["speedup"] < 5.0 else "") + " |")
-    lp = r["loop"]
-    rows.append(
-        f"| 1 kHz loop, mock driver, cmd_vel {lp['cmd_hz']:.0f} Hz in, odom "
-        f"{lp['odom_hz']:.0f} Hz out, {lp['seconds']:.0f} s | {lp['rate_hz']:.1f} Hz; period "
-        f"p50 {lp['period_p50_ms']:.3f} ms, p99 {lp['period_p99_ms_median_window']:.3f} ms "
-        f"(median of {lp['windows']} 2-s windows; worst window {lp['period_p99_ms_worst_window']:.3f} ms), "
-        f"max {lp['period_max_ms']:.2f} ms, {lp['overruns']} overruns (cycles more than a "
-        f"period late) | p99 ≤ 1.1 ms, none "
-        f"later than 5 ms | {verdict(lp['period_p99_ms_worst_window'] <= 1.1)} (p99), "
-        f"{verdict(lp['period_max_ms'] <= 5.0)} (max) |")
+    for lp in r.get("loop_1khz") or ([dict(r["loop"], what=f"{r['loop']['robot']}, mock "
+                                           "driver, odom 50 Hz", realtime=None)]
+                                     if "loop" in r else []):
+        rt = lp["realtime"]
+        limit_p99, limit_max = (1.05, 2.0) if rt else (1.1, 5.0)
+        over = (f", periods > 2 ms: {lp['periods_over_2ms']}, > 5 ms: {lp['periods_over_5ms']}"
+                if "periods_over_2ms" in lp else "")
+        out = ""
+        if "outside_stamps" in lp and lp["outside_stamps"].get("count"):
+            st, ar = lp["outside_stamps"], lp["outside_arrivals"]
+            out = (f"; from outside ({lp['joint_states_hz']:.0f} joint_states/s received): "
+                   f"stamps p99 {st['p99_ms']:.3f} ms, max {st['max_ms']:.2f} ms, > 2 ms: "
+                   f"{st['over_2ms']}, > 5 ms: {st['over_5ms']}; arrivals p99 "
+                   f"{ar['p99_ms']:.3f} ms, max {ar['max_ms']:.2f} ms")
+        # the loop's own counts over the measurement decide "none later than";
+        # the windows' max can reach up to 2 s before it (a window spans 2000 cycles)
+        if "periods_over_2ms" in lp:
+            none_later = lp["periods_over_2ms" if rt else "periods_over_5ms"] == 0
+        else:
+            none_later = lp["period_max_ms"] <= limit_max
+        rows.append(
+            f"| 1 kHz loop, {lp['what']}, "
+            + ("" if rt is None else f"real-time {'on' if rt else 'off'} "
+               f"({lp.get('scheduling', '?')}), ")
+            + f"cmd_vel {lp['cmd_hz']:.0f} Hz in, odom {lp['odom_hz']:.0f} Hz out, "
+            f"{lp['seconds']:.0f} s | {lp['rate_hz']:.1f} Hz; loop's own period "
+            f"p50 {lp['period_p50_ms']:.3f} ms, p99 {lp['period_p99_ms_median_window']:.3f} ms "
+            f"(median of {lp['windows']} 2-s windows; worst window "
+            f"{lp['period_p99_ms_worst_window']:.3f} ms), max {lp['period_max_ms']:.2f} ms "
+            f"(the windows'), "
+            f"{lp['overruns']} overruns{over}{out} | p99 ≤ {limit_p99} ms, none later than "
+            f"{limit_max:g} ms | {verdict(lp['period_p99_ms_worst_window'] <= limit_p99)} (p99), "
+            f"{verdict(none_later)} (max) |")
     la = r["latency"]
     rows.append(
-        f"| command latency, TwistStamped from another process → joint command written, "
-        f"{la['matched']} commands | p50 {la['e2e_p50_ms']:.3f} ms, p99 {la['e2e_p99_ms']:.3f} ms "
-        f"(in the node's callback: p50 {la['node_rx_p50_ms']:.3f} ms); "
+        f"| command latency, TwistStamped from another process → the control cycle using it, "
+        f"{la['matched']} commands | p50 {la['e2e_p50_ms']:.3f} ms, p99 {la['e2e_p99_ms']:.3f} ms"
+        + (f" (in the node's callback: p50 {la['node_rx_p50_ms']:.3f} ms)"
+           if "node_rx_p50_ms" in la else "") + "; "
         f"DDS one-way p50 {la['dds_p50_ms']:.3f} ms, p99 {la['dds_p99_ms']:.3f} ms: "
         f"**{la['ratio_p50']:.2f}×** | p50 ≤ 2× DDS | {verdict(la['ratio_p50'] <= 2.0)} |")
     for s in r["sim"]:
@@ -253,15 +294,24 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
 
 ## The targets not met, and what it would take
 
-- **1 kHz loop: p99 ≤ 1.1 ms and nothing later than 5 ms.** The loop thread sleeps to absolute
-  deadlines and busy-waits the last 0.2 ms, but it shares the GIL with the executor thread
-  (callbacks, publishing) and two cores with the DDS threads and the traffic generator: about
-  one cycle in a hundred starts 0.3-0.8 ms late, and every few seconds one is delayed by several
-  milliseconds (not the garbage collector: the node freezes its start-up objects and a full
-  collection then takes 0.05 ms). At 200 Hz, the product's default rate, the same jitter is a
-  small fraction of the period. Holding 1 kHz hard needs the loop outside the GIL -- a real-time
-  thread (SCHED_FIFO, which needs CAP_SYS_NICE) in a compiled process (ros2_control's
-  controller_manager is the usual answer) -- not more Python tuning.
+- **1 kHz loop** (docs/realtime.md). The loop now runs in a process of its own (the driver,
+  the controller and the simulator; the ROS node is a shell), so it no longer shares the
+  interpreter lock with the executor. With SCHED_FIFO it holds 1 kHz on the mock driver
+  (p99 1.001 ms) even on the 2-core machine at load 10-16 from other work (these rows were
+  measured so, niced: indicative; the lead re-measures idle). What remains:
+  * *without real-time priority* the loop is an ordinary process among everything else on
+    two cores: at that load it got 73 % of its cycles (HAMR) and 18 % (XR4000 with 1 kHz
+    physics); on an idle machine it is the executor-free loop of the design, but no
+    guarantee;
+  * *with SCHED_FIFO* on a standard (not PREEMPT_RT) kernel, in a VM: a few periods over
+    2 ms a minute (the hypervisor and the kernel's non-preemptible sections, not our code:
+    the loop's compute p99 is tens of µs); the XR4000 in torque mode also steps 1 kHz
+    physics of four casters in the same cycle (0.4-0.6 ms), leaving little room: its p99
+    1.16 ms and 17 periods over 5 ms under that load;
+  * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz from Python,
+    ~0.2-0.3 ms a record; on the loaded machine the node (an ordinary process) fell behind
+    and the bench's own subscriber too (570-716 of 1000 joint_states a second received),
+    so the outside periods there measure the publishing path, not the loop.
 - **Simulation speed with the drive model ≥ 60 % of raw pybullet (HAMR).** The drive model
   makes the physics itself cheaper (joint torques and weak friction motors instead of
   pybullet's stiff velocity motors: raw stepping of the HAMR ran 1.6-2× as fast as with ideal
@@ -287,15 +337,26 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   stays interpreter-bound (~1 µs per Python operation) at 1.5-3.5× the baseline. The
   benchmark also checks that both controllers end with the same joint commands and pose.
   `python bench/run.py --only compute` re-runs these two rows alone.
-- **1 kHz loop**: `holonomic-bringup hamr --driver mock -p control_rate:=1000.0` as its own
-  process; this process publishes `cmd_vel` at 100 Hz and subscribes `odom`. The loop's period
-  statistics come from its own diagnostics (1 Hz, each over the last 2000 cycles, overlapping
-  and covering the measurement); start-up is not measured.
+- **1 kHz loop** (`python bench/run.py --only loop` re-runs these rows and the latency):
+  `holonomic-bringup hamr --driver mock` and `holonomic-bringup xr4000 --driver sim -p
+  control_mode:=torque` with `-p control_rate:=1000.0 -p publish_rate:=1000.0`, each once with
+  `-p loop.realtime:=false` and once with the default (SCHED_FIFO 50 and mlockall where
+  permitted; the row names the policy the loop got), 60 s each, as their own processes; this
+  process publishes `cmd_vel` at 100 Hz and subscribes `odom` and `joint_states`. The loop's
+  own period statistics come from its diagnostics (the loop process's cycle timestamps; 1 Hz,
+  each over the last 2000 cycles, overlapping and covering the measurement; periods over 2 ms
+  and 5 ms counted by the loop); start-up is not measured. From outside: the periods between
+  consecutive `joint_states` stamps (the cycle's driver reading; for the mock on the monotonic
+  clock, for the simulator simulated time, so only the mock's say anything) and between their
+  arrivals here (DDS and this subscriber included). A received rate below 1000/s means the
+  node or this subscriber did not keep up with three 1 kHz topics.
 - **Command latency**: a base controller node (1 kHz, mock driver, `cmd_vel_stamped`,
-  acceleration limits out of the way) in this process, instrumented to timestamp the write of
-  the first joint command computed from each `TwistStamped`; the publisher is another process
-  stamping each message with the system clock; a plain subscriber in this process gives DDS's
-  one-way latency for the same messages.
+  acceleration limits out of the way, its loop in its own process) in this process; the
+  node's public state-record hook (`node.link.on_record`, every cycle) times the first cycle
+  whose commanded twist is each `TwistStamped`'s, at that cycle's driver reading (its joint
+  command is written tens of µs later); the publisher is another process stamping each
+  message with the system clock; a plain subscriber in this process gives DDS's one-way
+  latency for the same messages.
 - **Simulation speed**: `BaseController` + `sim` driver stepped as fast as possible (1 kHz
   physics, 200 Hz control, a constant twist), against raw pybullet: the time the
   `pybullet.stepSimulation` calls of the same run take alone (each timed); once with ideal
@@ -306,7 +367,7 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
 - **Fleet**: N robots in one world, a `BaseController` each, one loop (the `--fleet` runner's
   cycle), no ROS.
 - **Memory**: `holonomic-bringup hamr --enable` (simulator) driven by `cmd_vel` at 20 Hz for the
-  whole run; RSS from `/proc` every 10 s.
+  whole run; RSS of the node and its loop process from `/proc` every 10 s.
 - **Foxglove bridge**: `holonomic-bringup hamr -p control_rate:=1000.0` (simulator) driven as
   the 1 kHz row, in alternating blocks without and with `--foxglove PORT`; with it, a
   `websockets` client in this process subscribes to every channel and reads everything (what

@@ -1,14 +1,18 @@
 """The base controller node: a thin ROS shell around holonomic_core.
 
-Parameters -> a validated RobotConfig -> driver + BaseController; messages in
--> ``BaseController.set_command``; the control loop thread runs
-``BaseController.step`` at ``control_rate`` and publishes odometry, /tf,
-joint states, diagnostics (and, with the simulator, ground truth and /clock)
-from the same thread, decimated to ``publish_rate`` / 1 Hz. The robot's URDF
+Parameters -> a validated RobotConfig; the driver and the BaseController run
+in the robot's control loop process (:mod:`loop_host`, docs/realtime.md),
+which this node starts through a :class:`~loop_client.LoopClient`. Messages
+in -> the loop's command pipe and request socket; the loop's state records
+(every ``publish_rate`` cycle) -> odometry, /tf, joint states (and, with the
+simulator, ground truth and /clock), published from the client's reader
+thread; its status (``BaseController.status``, once a second) ->
+diagnostics. A loop that ends or hangs is reported as an ERROR. The robot's URDF
 (the one the simulator is built from) is latched on ``robot_description``;
 with ``publish_link_tf`` every link's transform (from the measured joint
 positions) goes on /tf too. :meth:`BaseControllerNode.attach_foxglove` hands
-the same state to a Foxglove bridge (``--foxglove``).
+the same state to a Foxglove bridge (``--foxglove``). :func:`run_robots` is
+the one runner of ``holonomic-bringup``, for a robot and for ``--fleet``.
 
 The robot's YAML is named by the ``robot_config`` parameter (a config name or
 a path); every key of it can be overridden with ROS parameters
@@ -43,12 +47,13 @@ from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
 
 from holonomic_core.config import config_from_flat, read_params_file, resolve_config
-from holonomic_core.controller import BaseController, ControllerState
+from holonomic_core.controller import ControllerState
 from holonomic_core.description import generate_urdf
-from holonomic_core.driver import DriverError
+from holonomic_core.limits import is_finite_twist
 from holonomic_core.link_transforms import LinkTree
-from holonomic_core.loop import ControlLoop
 from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_bringup import loop_wire as wire
+from holonomic_bringup.loop_client import LoopClient, LoopLost
 from holonomic_bringup.process_guard import (STOP, InstanceConflict, InstanceLock,
                                              install_signal_handlers)
 
@@ -69,6 +74,8 @@ _PLANAR = (0, 1, 5)
 #: variance of the components a planar base does not move in (z, roll, pitch)
 _PLANAR_LOCKED_VARIANCE = 1e-9
 _SERVICE_TIMEOUT = 2.0  # [s] for the loop to execute a request
+#: a state record's state index -> the state (loop_host writes the index)
+_STATES = tuple(ControllerState)
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
@@ -115,79 +122,94 @@ def _fill_covariance(target, cov3: np.ndarray) -> None:
 class BaseControllerNode(Node):
     """See the module docstring. Raises ConfigError (clean message) on bad config."""
 
-    def __init__(self, world=None, start_loop: bool = True, **kwargs):
-        """``world``: a shared simulated world (a fleet in one simulation; the
-        ``sim`` driver then does not step it). ``start_loop``: False when the
-        caller runs :meth:`control_cycle` itself (the fleet's one loop)."""
+    def __init__(self, start_loop: bool = True, publish_clock: bool = True, **kwargs):
+        """``start_loop``: start this robot's own control loop (see
+        :mod:`loop_client`); False when the caller runs one loop for several
+        nodes (the fleet) and hands each its link with :meth:`attach`.
+        ``publish_clock``: publish /clock with the simulator (the fleet: its
+        first robot only)."""
+        # every override (command line, params files, ``parameter_overrides``)
+        # declared, so that the node can read them through the public API
+        kwargs.setdefault("automatically_declare_parameters_from_overrides", True)
         super().__init__(NODE_NAME, **kwargs)
         self._logged_fault: str | None = None
-        self._world = world
-        self._start_loop = start_loop
+        self._publish_clock = publish_clock
         self._instance_lock: InstanceLock | None = None
+        self.loop: LoopClient | None = None     # this node's own loop (start_loop)
+        self.link = None
+        self._status = None            # the latest ControllerStatus
+        self._latest = None            # the latest StateRecord
+        self._lost_logged = False
         try:
             self._configure()
+            if start_loop:
+                values = self.config.values
+                self.loop = LoopClient([self.loop_setup()], process=values["loop.process"],
+                                       watchdog_timeout=values["loop.watchdog_timeout"])
+                self.loop.start()
+                self.attach(self.loop.links[0])
         except BaseException:
+            if self.loop is not None:
+                self.loop.stop()
             if self._instance_lock is not None:
                 self._instance_lock.release()
             raise
 
     def _configure(self) -> None:
-        self.declare_parameter("robot_config", "", ParameterDescriptor(
-            type=ParameterType.PARAMETER_STRING, read_only=True,
-            description="Robot config: a name from config/ (hamr, xr4000, comr3) or a YAML "
-                        "path. Empty: take the whole configuration from parameter overrides."))
-        self.config = self._load_config()
-        model, ctrl = self.config.model, self.config.controller
+        self.config, self._flat = self._load_config()
         self._declare_config_parameters()
-
         # After the configuration is known valid (a bad config says so, exit
         # 2) and before the driver exists: a second controller must not even
         # open the motors' bus (raises InstanceConflict).
         self._instance_lock = InstanceLock(self.get_fully_qualified_name())
-
-        # driver + core
-        extra = {"world": self._world} if self._world is not None else {}
-        self.driver = self.config.driver_class(model, self.config.values, ctrl.control_rate,
-                                               **extra)
-        try:
-            self.driver.configure()
-        except DriverError as exc:
-            self.driver.close()
-            raise ConfigError("driver", ctrl.driver, f"a backend that configures ({exc})") from exc
-        self.controller = BaseController(self.config, self.driver)
-        self._sim = self.driver.sim_time() is not None
-        # Simulated time is reported on an epoch = the wall clock at start, so
-        # sim stamps and the stamps of nodes on system time agree while the
-        # simulator runs in real time.
-        self._epoch = time.time() if self._sim else 0.0
-
+        ctrl = self.config.controller
         prefix = self.config.values["frame_prefix"]
         self._odom_frame, self._base_frame = prefix + ctrl.odom_frame, prefix + ctrl.base_frame
         self._publish_tf = ctrl.publish_tf
         self._foxglove = None   # a foxglove_bridge.RobotFeed, see attach_foxglove
-        self._publish_every = max(1, round(ctrl.control_rate / ctrl.publish_rate))
-        self._clock_every = max(1, round(ctrl.control_rate / 250.0))
-        self._diag_every = max(1, round(ctrl.control_rate))
-        self._cycle = 0
 
-        self._make_interfaces()
-        self.loop = ControlLoop(1.0 / ctrl.control_rate, self.control_cycle,
-                                on_error=self._on_loop_error, name=f"{NODE_NAME}_loop")
-        self._loop_errors = 0
-        if ctrl.enable_on_start:
-            self.controller.request_enable(True)
-        if self._start_loop:
-            self.loop.start()
+    def loop_setup(self) -> tuple[dict, str, object]:
+        """What a :class:`LoopClient` needs to run this robot: its flat
+        config (file + overrides), the config's source, the robot model."""
+        return dict(self._flat), self.config.source, self.config.model
+
+    def attach(self, link) -> None:
+        """Connect to this robot's control loop (a started ``RobotLink``):
+        create the topics and services and start publishing its state."""
+        model, ctrl = self.config.model, self.config.controller
+        self.link = link
+        self._sim = bool(link.info["sim"])
+        # Simulated time is reported on an epoch = the wall clock at start, so
+        # sim stamps and the stamps of nodes on system time agree while the
+        # simulator runs in real time.
+        self._epoch = time.time() if self._sim else 0.0
+        self._make_interfaces(link.info)
+        for level, text in link.early_logs:
+            self._on_loop_log(level, text)
+        link.on_log = self._on_loop_log
+        link.on_status = self._on_status
+        link.on_lost = self._on_lost
+        link.on_record = self._on_record
+        where = "its own process" if self.loop is None or self.loop.process else "a thread"
         self.get_logger().info(
-            f"{model.name} ({model.kind}) on driver '{ctrl.driver}' at {ctrl.control_rate:g} Hz; "
+            f"{model.name} ({model.kind}) on driver '{ctrl.driver}' at {ctrl.control_rate:g} Hz "
+            f"(control loop in {where}); "
             f"motors {'arming' if ctrl.enable_on_start else 'DISARMED (call ~/enable)'}")
 
     # -- configuration ------------------------------------------------------------
     def _load_config(self):
-        source = self.get_parameter("robot_config").value
-        # rclpy has no public accessor for the overrides it parsed from the
-        # command line / params files: _parameter_overrides is that dict.
-        overrides = {name: p.value for name, p in self._parameter_overrides.items()
+        """The robot config (file + the ROS parameter overrides) and its flat dict."""
+        declared = self.get_parameters_by_prefix("")
+        source_param = declared.get("robot_config")
+        source = source_param.value if source_param is not None else ""
+        if source_param is not None:
+            # re-declared below with its read-only descriptor
+            self.undeclare_parameter("robot_config")
+        self.declare_parameter("robot_config", source or "", ParameterDescriptor(
+            type=ParameterType.PARAMETER_STRING, read_only=True,
+            description="Robot config: a name from config/ (hamr, xr4000, comr3) or a YAML "
+                        "path. Empty: take the whole configuration from parameter overrides."))
+        overrides = {name: p.value for name, p in declared.items()
                      if name not in _NOT_CONFIG and not name.startswith("qos_overrides.")}
         if source:
             path = resolve_config(source)
@@ -199,17 +221,25 @@ class BaseControllerNode(Node):
                                   "YAML path: --ros-args -p robot_config:=hamr, or the whole "
                                   "configuration through --ros-args --params-file FILE")
         flat.update(overrides)
-        return config_from_flat(flat, str(path))
+        return config_from_flat(flat, str(path)), flat
 
     def _declare_config_parameters(self) -> None:
         for spec in self.config.specs:
             value = self.config.values[spec.name]
             if isinstance(value, tuple):
                 value = list(value)
+            if self.has_parameter(spec.name):     # an override, declared without a schema
+                self.undeclare_parameter(spec.name)
             self.declare_parameter(spec.name, value, descriptor(spec), ignore_override=True)
+        names = {spec.name for spec in self.config.specs}
+        for name in self._flat:
+            # keys of the backends not in use (``sim.*`` on a real robot):
+            # allowed in the config, not parameters of this node
+            if name not in names and self.has_parameter(name) and name not in _NOT_CONFIG:
+                self.undeclare_parameter(name)
 
     # -- ROS interfaces -------------------------------------------------------------
-    def _make_interfaces(self) -> None:
+    def _make_interfaces(self, info) -> None:
         ctrl = self.config.controller
         # Only the latest command matters: a queue of one, so that a flood of
         # commands never builds a backlog (of memory or of stale motion).
@@ -223,8 +253,9 @@ class BaseControllerNode(Node):
         self.joint_pub = self.create_publisher(JointState, "joint_states", 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.gt_pub = self.create_publisher(OdometryMsg, "ground_truth/odom", 10) \
-            if self.driver.ground_truth() is not None else None
-        self.clock_pub = self.create_publisher(Clock, "/clock", 10) if self._sim else None
+            if info["ground_truth"] else None
+        self.clock_pub = self.create_publisher(Clock, "/clock", 10) \
+            if self._sim and self._publish_clock else None
         # The URDF the simulator uses, latched, for rviz (robot_state_publisher
         # is not needed for the base's own frames: odom -> base_link is on /tf).
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -263,7 +294,7 @@ class BaseControllerNode(Node):
         stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         if stamp > 0.0:  # an all-zero stamp means "unstamped": use the arrival time
             age = self.get_clock().now().nanoseconds * 1e-9 - stamp
-            timeout = self.controller.cmd_timeout
+            timeout = self.config.controller.cmd_timeout
             if age < -0.1 or (timeout > 0.0 and age > timeout):
                 self.get_logger().warn(
                     f"cmd_vel stamped {age:+.3f} s from now rejected (allowed: -0.1 s to "
@@ -273,17 +304,47 @@ class BaseControllerNode(Node):
         self._accept((twist.linear.x, twist.linear.y, twist.angular.z), received)
 
     def _accept(self, twist, received) -> None:
-        ignored = self.controller.counters["commands_while_disarmed"]
-        error = self.controller.set_command(twist, received)
-        if error:
-            self.get_logger().warn(error, throttle_duration_sec=1.0)
-        elif self.controller.counters["commands_while_disarmed"] != ignored:
-            fault = self.controller.fault
+        """Hand a command to the loop; the loop's controller validates it
+        again (and counts); here only what the user should read in the log."""
+        try:
+            values = tuple(float(v) for v in (twist[0], twist[1], twist[2]))
+            malformed = any(isinstance(v, bool) for v in (twist[0], twist[1], twist[2]))
+        except (TypeError, ValueError, OverflowError, IndexError, KeyError):
+            values, malformed = (math.nan,) * 3, True
+        if malformed:
+            values = (math.nan,) * 3
+        self.link.send_command(values, time.monotonic() if received is None else received)
+        if not is_finite_twist(values):
+            what = "malformed" if malformed else "non-finite"
+            self.get_logger().warn(f"{what} command {repr(twist)[:80]} rejected; stopping the "
+                                   "base", throttle_duration_sec=1.0)
+            return
+        state = self._state()
+        if any(values) and state is not ControllerState.ARMED:
+            fault = self._status.fault if self._status is not None else None
             self.get_logger().warn(
-                f"cmd_vel received while the motors are {self.controller.state.value.upper()}"
+                f"cmd_vel received while the motors are {state.value.upper()}"
                 f"{f' ({fault})' if fault else ''}: the base does not move (arm with "
                 "`holonomic-ctl enable` or the ~/enable service)",
                 throttle_duration_sec=5.0)
+
+    def _state(self) -> ControllerState:
+        """The controller's state as last reported by the loop."""
+        if self.loop_lost() is not None:
+            return ControllerState.FAULT
+        record, status = self._latest, self._status
+        if record is not None:
+            return _STATES[record.state_index]
+        return status.state if status is not None else ControllerState.DISARMED
+
+    def loop_lost(self) -> str | None:
+        """Why this robot's control loop is not running (None while it runs)."""
+        return None if self.link is None else self.link.client.lost
+
+    def latest_record(self):
+        """The loop's latest state record (``loop_wire.StateRecord``; None
+        before the first): odometry, joints, command of one cycle."""
+        return self._latest
 
     def _wait(self, future):
         try:
@@ -292,53 +353,50 @@ class BaseControllerNode(Node):
             return False, "the control loop did not answer within 2 s"
 
     def _on_enable(self, request, response):
-        response.success, response.message = self._wait(
-            self.controller.request_enable(request.data))
+        response.success, response.message = self._wait(self.link.request_enable(request.data))
         self.get_logger().info(f"~/enable {request.data}: {response.message}")
         return response
 
     def _on_reset_odometry(self, request, response):
-        response.success, response.message = self._wait(
-            self.controller.request_reset_odometry())
+        response.success, response.message = self._wait(self.link.request_reset_odometry())
         return response
 
-    # -- the loop thread ----------------------------------------------------------
-    def control_cycle(self) -> None:
-        controller = self.controller
-        controller.step()
-        self._loop_errors = 0
-        self._cycle += 1
-        reading = controller.reading
-        if reading is None:
-            if self._cycle % self._diag_every == 0:
-                self._publish_diagnostics()
-            return
+    # -- from the loop (the loop client's reader thread) ----------------------------
+    def _on_record(self, record) -> None:
+        self._latest = record
         if self._sim:
-            stamp = _stamp(self._epoch + reading.stamp)
-            if self.clock_pub is not None and self._cycle % self._clock_every == 0:
+            stamp = _stamp(self._epoch + record.stamp)
+            if self.clock_pub is not None and record.flags & wire.CLOCK:
                 self.clock_pub.publish(Clock(clock=stamp))
         else:
             # map the driver's monotonic stamp onto ROS time
             now = self.get_clock().now().nanoseconds * 1e-9
-            stamp = _stamp(now - (time.monotonic() - reading.stamp))
-        if self._cycle % self._publish_every == 0:
-            self._publish_state(stamp, reading)
-        if self._cycle % self._diag_every == 0:
-            self._publish_diagnostics()
+            stamp = _stamp(now - (time.monotonic() - record.stamp))
+        if record.flags & wire.PUBLISH:
+            self._publish_state(stamp, record)
 
-    def _publish_state(self, stamp: TimeMsg, reading) -> None:
-        odo = self.controller.odometry
-        x, y, yaw = (float(v) for v in odo.pose)
+    def _on_loop_log(self, level: str, text: str) -> None:
+        log = self.get_logger()
+        if level == "error":
+            log.error(text, throttle_duration_sec=1.0)
+        elif level == "warn":
+            log.warn(text)
+        else:
+            log.info(text)
+
+    def _publish_state(self, stamp: TimeMsg, record) -> None:
+        x, y, yaw = (float(v) for v in record.pose)
         msg = self._odom_msg
         msg.header.stamp = stamp
         msg.pose.pose.position.x = x
         msg.pose.pose.position.y = y
         _yaw_quaternion(msg.pose.pose.orientation, yaw)
-        _fill_covariance(msg.pose.covariance, odo.pose_covariance)
-        msg.twist.twist.linear.x = float(odo.twist[0])
-        msg.twist.twist.linear.y = float(odo.twist[1])
-        msg.twist.twist.angular.z = float(odo.twist[2])
-        _fill_covariance(msg.twist.covariance, odo.twist_covariance)
+        _fill_covariance(msg.pose.covariance, record.pose_covariance)
+        twist = record.twist
+        msg.twist.twist.linear.x = float(twist[0])
+        msg.twist.twist.linear.y = float(twist[1])
+        msg.twist.twist.angular.z = float(twist[2])
+        _fill_covariance(msg.twist.covariance, record.twist_covariance)
         self.odom_pub.publish(msg)
         transforms = []
         if self._publish_tf:
@@ -349,20 +407,21 @@ class BaseControllerNode(Node):
             _yaw_quaternion(tf.transform.rotation, yaw)
             transforms.append(tf)
         if self._link_tree is not None:
-            transforms += self._link_transforms(stamp, reading.positions)
+            transforms += self._link_transforms(stamp, record.positions)
         if transforms:
             self.tf_pub.publish(TFMessage(transforms=transforms))
         joints = self._joint_msg
         joints.header.stamp = stamp
-        joints.position = reading.positions.tolist()
-        joints.velocity = reading.velocities.tolist()
-        joints.effort = [] if np.all(np.isnan(reading.efforts)) else reading.efforts.tolist()
+        joints.position = record.positions.tolist()
+        joints.velocity = record.velocities.tolist()
+        efforts = record.efforts
+        joints.effort = [] if np.all(np.isnan(efforts)) else efforts.tolist()
         self.joint_pub.publish(joints)
-        truth = self.driver.ground_truth() if self.gt_pub is not None else None
-        if truth is not None:
-            self._publish_ground_truth(stamp, truth)
+        truth_pose, truth_twist = record.truth_pose, record.truth_twist
+        if self.gt_pub is not None and truth_pose is not None:
+            self._publish_ground_truth(stamp, truth_pose, truth_twist)
         if self._foxglove is not None:
-            self._offer_foxglove(stamp, reading, truth)
+            self._offer_foxglove(stamp, record)
 
     def _link_transforms(self, stamp: TimeMsg, positions) -> list[TransformStamped]:
         """publish_link_tf: parent -> child of every URDF joint at ``positions`` [rad]."""
@@ -375,17 +434,17 @@ class BaseControllerNode(Node):
             q.x, q.y, q.z, q.w = link.rotation
         return self._link_tfs
 
-    def _publish_ground_truth(self, stamp: TimeMsg, truth) -> None:
+    def _publish_ground_truth(self, stamp: TimeMsg, pose, twist) -> None:
         msg = OdometryMsg()
         msg.header.stamp = stamp
         msg.header.frame_id = self._odom_frame
         msg.child_frame_id = self._base_frame
-        msg.pose.pose.position.x = float(truth.pose[0])
-        msg.pose.pose.position.y = float(truth.pose[1])
-        _yaw_quaternion(msg.pose.pose.orientation, float(truth.pose[2]))
-        msg.twist.twist.linear.x = float(truth.twist[0])
-        msg.twist.twist.linear.y = float(truth.twist[1])
-        msg.twist.twist.angular.z = float(truth.twist[2])
+        msg.pose.pose.position.x = float(pose[0])
+        msg.pose.pose.position.y = float(pose[1])
+        _yaw_quaternion(msg.pose.pose.orientation, float(pose[2]))
+        msg.twist.twist.linear.x = float(twist[0])
+        msg.twist.twist.linear.y = float(twist[1])
+        msg.twist.twist.angular.z = float(twist[2])
         self.gt_pub.publish(msg)
 
     # -- Foxglove -------------------------------------------------------------------
@@ -405,131 +464,142 @@ class BaseControllerNode(Node):
             command_sink=(lambda twist: self._accept(twist, None))
             if bridge.allow_control else None))
 
-    def _offer_foxglove(self, stamp: TimeMsg, reading, truth) -> None:
-        # the loop's whole cost: copy plain numbers and hand over a reference
-        c, odo = self.controller, self.controller.odometry
+    def _offer_foxglove(self, stamp: TimeMsg, record) -> None:
+        # the reader thread's whole cost: copy plain numbers, hand over a reference
+        status = self._status
+        truth_pose, truth_twist = record.truth_pose, record.truth_twist
         self._foxglove.offer(
             stamp_ns=stamp.sec * 1_000_000_000 + stamp.nanosec,
-            pose=tuple(odo.pose.tolist()), pose_covariance=tuple(odo.pose_covariance.tolist()),
-            twist=tuple(odo.twist.tolist()),
-            twist_covariance=tuple(odo.twist_covariance.tolist()),
-            twist_command=tuple(c.twist_command.tolist()),
-            joint_positions=tuple(reading.positions.tolist()),
-            joint_velocities=tuple(reading.velocities.tolist()),
-            slip_residual=tuple(np.asarray(odo.residual).tolist()),
-            state=c.state.value, fault=c.fault, stale=c.stale, saturation=float(c.saturation),
-            truth_pose=None if truth is None else tuple(truth.pose.tolist()),
-            truth_twist=None if truth is None else tuple(truth.twist.tolist()))
+            pose=tuple(record.pose.tolist()),
+            pose_covariance=tuple(record.pose_covariance.tolist()),
+            twist=tuple(record.twist.tolist()),
+            twist_covariance=tuple(record.twist_covariance.tolist()),
+            twist_command=tuple(record.twist_command.tolist()),
+            joint_positions=tuple(record.positions.tolist()),
+            joint_velocities=tuple(record.velocities.tolist()),
+            slip_residual=tuple(record.residual.tolist()),
+            state=_STATES[record.state_index].value,
+            fault=status.fault if status is not None else None, stale=record.stale,
+            saturation=record.saturation,
+            truth_pose=None if truth_pose is None else tuple(truth_pose.tolist()),
+            truth_twist=None if truth_twist is None else tuple(truth_twist.tolist()))
 
-    def _publish_diagnostics(self) -> None:
-        c = self.controller
-        robot = self.config.model.name
-        state = c.state
-        now = self.get_clock().now().to_msg()
-        level_driver = DiagnosticStatus.ERROR if state is ControllerState.FAULT else DiagnosticStatus.OK
-        driver_values = dict(self.driver.status())
-        driver_values["controller_state"] = state.value
-        driver_values["driver_errors"] = str(c.counters["driver_errors"])
-        driver_values["implausible_readings"] = str(c.counters["implausible_readings"])
-        if c.fault:
-            driver_values["fault"] = c.fault
-        if c.fault and c.fault != self._logged_fault:
+    # -- diagnostics ------------------------------------------------------------------
+    def _on_status(self, status, loop: dict) -> None:
+        """The loop's status (once a second): diagnostics."""
+        self._status = status
+        if status.fault and status.fault != self._logged_fault:
             # once per fault: the cause belongs in the log, not only in diagnostics
-            self.get_logger().error(f"motors stopped: {c.fault}")
-        self._logged_fault = c.fault
-        loop = self.loop.stats.summary()
+            self.get_logger().error(f"motors stopped: {status.fault}")
+        self._logged_fault = status.fault
         period_ms = 1e3 / self.config.controller.control_rate
         loop_level = DiagnosticStatus.OK if loop["period_p99_ms"] <= 2.0 * period_ms \
             else DiagnosticStatus.WARN
-        age = c.command_age()
-        cmd_values = {
-            "command_age_s": f"{age:.3f}" if math.isfinite(age) else "none",
-            "stale": str(c.stale), "timeouts": str(c.counters["timeouts"]),
-            "rejected_commands": str(c.counters["rejected_commands"]),
-            "saturation_scale": f"{c.saturation:.3f}",
-            "twist_command": " ".join(f"{v:.3f}" for v in c.twist_command),
-        }
-        odo = c.odometry
-        odo_values = {"estimator": odo.estimator, "distance_m": f"{odo.distance:.3f}"}
-        for name, value in zip(self._unit_names(), odo.residual):
-            odo_values[f"slip_residual_{name}_m_s"] = f"{value:.4f}"
-        # a caster above the threshold for a while: WARN naming it
-        slipping = c.slip_monitor.slipping(c.reading.stamp) if c.reading is not None else []
-        limits = c.slip_monitor.limits
-        odo_level, odo_message = DiagnosticStatus.OK, f"{odo.estimator}, {odo.distance:.2f} m"
-        if slipping:
-            odo_level = DiagnosticStatus.WARN
-            odo_message = "slipping: " + ", ".join(
-                f"caster {name} residual above {limits.threshold:g} m/s for {seconds:.1f} s"
-                for name, seconds in slipping)
-            odo_values["slipping_casters"] = " ".join(name for name, _ in slipping)
         statuses = [
-            self._status(f"{NODE_NAME}: driver", level_driver,
-                         c.fault or f"{self.config.controller.driver} {state.value}", driver_values),
-            self._status(f"{NODE_NAME}: control loop", loop_level,
-                         f"{loop['rate_hz']:.1f} Hz, p99 period {loop['period_p99_ms']:.2f} ms",
-                         {k: f"{v:.3f}" if isinstance(v, float) else str(v) for k, v in loop.items()}),
-            self._command_status(cmd_values),
-            self._status(f"{NODE_NAME}: odometry", odo_level, odo_message, odo_values),
+            self._driver_status(status),
+            self._status_msg(f"{NODE_NAME}: control loop", loop_level,
+                             f"{loop['rate_hz']:.1f} Hz, p99 period {loop['period_p99_ms']:.2f} ms",
+                             {k: f"{v:.3f}" if isinstance(v, float) else str(v)
+                              for k, v in loop.items()}),
+            self._command_status(status),
+            self._odometry_status(status),
         ]
-        if c.drift is not None:
+        if status.drift_findings is not None:
             # its own status: a geometry that drifted is not a slip event
-            findings = c.drift.findings()
-            statuses.append(self._status(
+            findings = status.drift_findings
+            statuses.append(self._status_msg(
                 f"{NODE_NAME}: calibration",
                 DiagnosticStatus.WARN if findings else DiagnosticStatus.OK,
                 findings[0] if findings else
-                "not enough motion yet to judge the geometry" if c.drift.error is None else
-                "configured geometry consistent with the motion",
-                c.drift.values()))
+                "configured geometry consistent with the motion" if status.drift_judged else
+                "not enough motion yet to judge the geometry", dict(status.drift_values)))
+        self._publish_diagnostics(statuses)
+
+    def _on_lost(self, reason: str) -> None:
+        """The loop ended or hung (once a second while it is down): ERROR."""
+        if not self._lost_logged:
+            self.get_logger().error(f"motors stopped: {reason}")
+            self._lost_logged = True
+        driver = self.config.controller.driver
+        how = ("the simulation stopped with it" if self._sim else
+               "the drives' own watchdogs stop the motors")
+        values = {"controller_state": ControllerState.FAULT.value, "fault": reason,
+                  "backend": driver}
+        self._publish_diagnostics([
+            self._status_msg(f"{NODE_NAME}: driver", DiagnosticStatus.ERROR,
+                             f"{reason}; {how}", values),
+            self._status_msg(f"{NODE_NAME}: control loop", DiagnosticStatus.ERROR, reason,
+                             {"rate_hz": "0.000"}),
+        ])
+
+    def _publish_diagnostics(self, statuses) -> None:
+        now = self.get_clock().now().to_msg()
         for status in statuses:
-            status.hardware_id = robot
+            status.hardware_id = self.config.model.name
         self.diag_pub.publish(DiagnosticArray(header=Header(stamp=now), status=statuses))
         if self._foxglove is not None:
             self._foxglove.offer_diagnostics(now.sec * 1_000_000_000 + now.nanosec, [
                 (s.name, ord(s.level), s.message, s.hardware_id,
                  tuple((kv.key, kv.value) for kv in s.values)) for s in statuses])
 
-    def _command_status(self, values) -> DiagnosticStatus:
-        c = self.controller
-        values["commands_while_disarmed"] = str(c.counters["commands_while_disarmed"])
+    def _driver_status(self, status) -> DiagnosticStatus:
+        level = DiagnosticStatus.ERROR if status.state is ControllerState.FAULT \
+            else DiagnosticStatus.OK
+        values = dict(status.driver)
+        values["controller_state"] = status.state.value
+        values["driver_errors"] = str(status.driver_errors)
+        values["implausible_readings"] = str(status.implausible_readings)
+        if status.fault:
+            values["fault"] = status.fault
+        return self._status_msg(f"{NODE_NAME}: driver", level, status.fault or
+                                f"{self.config.controller.driver} {status.state.value}", values)
+
+    def _command_status(self, status) -> DiagnosticStatus:
+        age = status.command_age
+        values = {
+            "command_age_s": f"{age:.3f}" if math.isfinite(age) else "none",
+            "stale": str(status.stale), "timeouts": str(status.timeouts),
+            "rejected_commands": str(status.rejected_commands),
+            "saturation_scale": f"{status.saturation:.3f}",
+            "twist_command": " ".join(f"{v:.3f}" for v in status.twist_command),
+            "commands_while_disarmed": str(status.commands_while_disarmed),
+        }
         # WARN while commands arrive that the disarmed motors cannot follow
         # (within the last 2 diagnostics periods)
-        if c.commanded_while_disarmed(2.0):
-            return self._status(f"{NODE_NAME}: command", DiagnosticStatus.WARN,
-                                f"commands received while {c.state.value}: not moving "
-                                "(holonomic-ctl enable)", values)
-        return self._status(f"{NODE_NAME}: command", DiagnosticStatus.OK,
-                            "stale: stopping" if c.stale else "tracking", values)
+        if status.commanded_while_disarmed:
+            return self._status_msg(f"{NODE_NAME}: command", DiagnosticStatus.WARN,
+                                    f"commands received while {status.state.value}: not moving "
+                                    "(holonomic-ctl enable)", values)
+        return self._status_msg(f"{NODE_NAME}: command", DiagnosticStatus.OK,
+                                "stale: stopping" if status.stale else "tracking", values)
+
+    def _odometry_status(self, status) -> DiagnosticStatus:
+        values = {"estimator": status.estimator, "distance_m": f"{status.distance:.3f}"}
+        for name, value in zip(self._unit_names(), status.residual):
+            values[f"slip_residual_{name}_m_s"] = f"{value:.4f}"
+        # a caster above the threshold for a while: WARN naming it
+        level, message = DiagnosticStatus.OK, f"{status.estimator}, {status.distance:.2f} m"
+        if status.slipping:
+            level = DiagnosticStatus.WARN
+            message = "slipping: " + ", ".join(
+                f"caster {name} residual above {status.slip_threshold:g} m/s for {seconds:.1f} s"
+                for name, seconds in status.slipping)
+            values["slipping_casters"] = " ".join(name for name, _ in status.slipping)
+        return self._status_msg(f"{NODE_NAME}: odometry", level, message, values)
 
     def _unit_names(self):
         kin = self.config.model.kinematics
         return getattr(kin, "caster_names", ())
 
     @staticmethod
-    def _status(name, level, message, values) -> DiagnosticStatus:
+    def _status_msg(name, level, message, values) -> DiagnosticStatus:
         return DiagnosticStatus(level=level, name=name, message=message,
                                 values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
-    def _on_loop_error(self, exc: BaseException) -> bool:
-        """An unexpected exception in the cycle: stop the motors, keep the loop.
-
-        After 50 consecutive failures the loop stops; the motors stay off.
-        """
-        self._loop_errors += 1
-        self.get_logger().error(f"control cycle failed: {exc!r}; stopping the motors",
-                                throttle_duration_sec=1.0)
-        try:
-            self.driver.deactivate()
-        except DriverError:
-            pass
-        self.controller.fault = f"internal error: {exc!r}"
-        return self._loop_errors < 50
-
     def shutdown(self) -> None:
-        """Stop the loop, stop and disarm the motors, close the driver."""
-        self.loop.stop()
-        self.controller.shutdown()
+        """Stop the loop (it stops and disarms the motors, closes the driver)."""
+        if self.loop is not None:
+            self.loop.stop()
         if self._instance_lock is not None:
             self._instance_lock.release()
 
@@ -544,11 +614,6 @@ def main(argv: list[str] | None = None, record: str | None = None, foxglove=None
     already runs (same namespace and ROS domain).
     """
     install_signal_handlers()   # before anything slow: a signal at any moment
-    # The control loop thread shares the GIL with the executor's callbacks. By
-    # default a thread that wants the GIL waits up to 5 ms -- a whole 200 Hz
-    # period -- while a flood of cmd_vel callbacks holds it; 0.5 ms bounds
-    # the loop's extra jitter at a tenth of a period.
-    sys.setswitchinterval(5e-4)
     argv = sys.argv if argv is None else argv
     # Our own signal handling: rclpy's would shut the context down before we
     # have stopped the motors.
@@ -560,49 +625,96 @@ def main(argv: list[str] | None = None, record: str | None = None, foxglove=None
     if STOP.is_set():
         rclpy.try_shutdown()
         return 0
-    try:
-        node = BaseControllerNode()
-    except ConfigError as exc:
-        print(f"{NODE_NAME}: configuration error: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    except InstanceConflict as exc:
-        print(f"{NODE_NAME}: refusing to start: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 3
-    # At high control rates the loop must get the GIL back sooner than 0.5 ms.
-    sys.setswitchinterval(min(5e-4, 0.2 * node.loop.period))
-    # Everything built so far lives for the whole run: out of the garbage
-    # collector's way, so that its full collections stay short.
-    gc.freeze()
+    return run_robots([{}], record=record, foxglove=foxglove, prog=NODE_NAME)
+
+
+def run_robots(robots: list[dict], record: str | None = None, foxglove=None,
+               prog: str = NODE_NAME, shared_world: bool = False, label=None) -> int:
+    """The runner of ``holonomic-bringup``, for one robot and for a fleet:
+    a node per robot (``robots``: the keyword arguments of each
+    :class:`BaseControllerNode`, e.g. ``namespace`` and ``cli_args``), one
+    control loop for all of them (``shared_world``: the fleet's one
+    simulation), the executor, recorder and Foxglove bridge, until
+    SIGINT/SIGTERM. rclpy is initialised by the caller and shut down here.
+    Exit codes as :func:`main`."""
+    nodes: list[BaseControllerNode] = []
+    client: LoopClient | None = None
     executor = SingleThreadedExecutor()
-    executor.add_node(node)
     recorder = None
     try:
+        for k, kwargs in enumerate(robots):
+            where = f"{kwargs['namespace']}: " if len(robots) > 1 else ""
+            try:
+                nodes.append(BaseControllerNode(start_loop=False, publish_clock=k == 0,
+                                                **kwargs))
+            except ConfigError as exc:
+                print(f"{prog}: {where}configuration error: {exc}", file=sys.stderr)
+                return 2
+            except InstanceConflict as exc:
+                print(f"{prog}: {where}refusing to start: {exc}", file=sys.stderr)
+                return 3
+            except rclpy_implementation.RCLError as exc:   # a malformed -p of the fleet
+                print(f"{prog}: {where}invalid ROS arguments: {str(exc).splitlines()[0]}",
+                      file=sys.stderr)
+                return 2
+        first = nodes[0].config.values
+        if shared_world and (first["driver"] != "sim" or first["sim.gui"]):
+            print(f"{prog}: --fleet is simulation only and runs headless (driver sim, "
+                  "no sim.gui)", file=sys.stderr)
+            return 2
+        client = LoopClient([n.loop_setup() for n in nodes], process=first["loop.process"],
+                            shared_world=shared_world,
+                            watchdog_timeout=first["loop.watchdog_timeout"])
+        try:
+            client.start()
+        except ConfigError as exc:
+            print(f"{prog}: configuration error: {exc}", file=sys.stderr)
+            return 2
+        except LoopLost as exc:
+            print(f"{prog}: {exc}", file=sys.stderr)
+            return 1
+        for node, link in zip(nodes, client.links):
+            node.attach(link)
+            executor.add_node(node)
+        # The node's reader thread publishes up to 1 kHz: it must get the GIL
+        # back from the executor's callbacks well within a period.
+        sys.setswitchinterval(min(5e-4, 0.2 / nodes[0].config.controller.control_rate))
+        # Everything built so far lives for the whole run: out of the garbage
+        # collector's way, so that its full collections stay short.
+        gc.freeze()
         if record:
             from holonomic_bringup.recorder import McapRecorder
             try:
-                recorder = McapRecorder(node, record, [(node.get_namespace(),
-                                                        dict(node.config.values),
-                                                        node.config.controller.cmd_vel_stamped)])
+                recorder = McapRecorder(nodes[0], record, [
+                    (n.get_namespace(), dict(n.config.values),
+                     n.config.controller.cmd_vel_stamped) for n in nodes])
             except OSError as exc:
-                print(f"{NODE_NAME}: cannot record to {record}: {exc}", file=sys.stderr)
+                print(f"{prog}: cannot record to {record}: {exc}", file=sys.stderr)
                 return 2
-            node.get_logger().info(f"recording to {record}")
+            nodes[0].get_logger().info(f"recording to {record}")
         if foxglove is not None:
-            node.attach_foxglove(foxglove)
+            for node in nodes:
+                node.attach_foxglove(foxglove)
             foxglove.start()
-            node.get_logger().info(foxglove.summary())
+            nodes[0].get_logger().info(foxglove.summary())
+        if label is not None:
+            nodes[0].get_logger().info(label(nodes))
         while not STOP.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
     finally:
-        node.shutdown()
-        node.get_logger().info("motors stopped and disarmed; exiting")
+        if client is not None:
+            client.stop()
+        for node in nodes:
+            node.shutdown()
+        if nodes and client is not None:
+            nodes[0].get_logger().info(
+                ("fleet: " if len(nodes) > 1 else "") + "motors stopped and disarmed; exiting")
         if recorder is not None:
             recorder.close()
-            node.get_logger().info(f"wrote {recorder.count} messages to {record}")
+            nodes[0].get_logger().info(f"wrote {recorder.count} messages to {record}")
         executor.shutdown()
-        node.destroy_node()
+        for node in nodes:
+            node.destroy_node()
         rclpy.try_shutdown()
     return 0
 

@@ -35,6 +35,7 @@ from holonomic_core.description import Description, description_class
 from holonomic_core.drift_watch import DRIFT_SPECS
 from holonomic_core.driver import driver_class, driver_names, sim_drives_driver
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics, kinematics_class
+from holonomic_core.loop import LOOP_SPECS
 from holonomic_core.model import JointLimits, RobotModel
 from holonomic_core.monitor import MonitorLimits
 from holonomic_core.odometry import OdometryNoise
@@ -204,7 +205,7 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "How long a joint may miss its command by safety.tracking_error before the "
               "controller faults [s]; 0 disables the check.",
               default=0.5, minimum=0.0, maximum=60.0),
-] + _limit_specs() + DRIFT_SPECS
+] + _limit_specs() + DRIFT_SPECS + LOOP_SPECS
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ import math
 import numbers
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -46,6 +46,41 @@ class ControllerState(enum.Enum):
     ARMED = "armed"
     FAULT = "fault"
 
+
+@dataclasses.dataclass(frozen=True)
+class ControllerStatus:
+    """What the controller reports about itself (:meth:`BaseController.status`):
+    plain values, picklable, taken in the loop thread between two cycles.
+
+    Rates [m/s, m/s, rad/s] in base_link, times [s], distance [m].
+    """
+
+    state: ControllerState
+    fault: str | None
+    driver: Mapping[str, str]            #: the driver's own key/value status
+    cycles: int
+    driver_errors: int
+    implausible_readings: int
+    timeouts: int
+    rejected_commands: int
+    commands_while_disarmed: int
+    commanded_while_disarmed: bool       #: a non-zero command in the last 2 s while not armed
+    command_age: float                   #: [s], inf without a command
+    stale: bool
+    saturation: float
+    twist_command: tuple[float, float, float]
+    estimator: str
+    distance: float                      #: odometry path length [m]
+    residual: tuple[float, ...]          #: per caster [m/s]
+    slipping: tuple[tuple[str, float], ...]   #: (caster, seconds above the threshold)
+    slip_threshold: float                #: [m/s]
+    drift_findings: tuple[str, ...] | None    #: None: no drift watch for this robot
+    drift_judged: bool                   #: the drift watch has enough motion to judge
+    drift_values: Mapping[str, str]
+
+
+#: how far back a command while disarmed makes the status say so [s]
+DISARMED_COMMAND_WINDOW = 2.0
 
 _ZERO3 = np.zeros(3)
 #: gain [1/s] of velocity mode's pull onto a followed trajectory's pose
@@ -171,6 +206,30 @@ class BaseController:
         """Seconds since the last command (inf if none)."""
         cmd = self._command
         return math.inf if cmd is None else self._clock() - cmd[1]
+
+    def status(self) -> ControllerStatus:
+        """A snapshot of the state, counters, command and odometry health
+        (the loop thread, between cycles: diagnostics are built from it)."""
+        c, odo = self.counters, self.odometry
+        reading = self.reading
+        return ControllerStatus(
+            state=self.state, fault=self.fault, driver=dict(self.driver.status()),
+            cycles=c["cycles"], driver_errors=c["driver_errors"],
+            implausible_readings=c["implausible_readings"], timeouts=c["timeouts"],
+            rejected_commands=c["rejected_commands"],
+            commands_while_disarmed=c["commands_while_disarmed"],
+            commanded_while_disarmed=self.commanded_while_disarmed(DISARMED_COMMAND_WINDOW),
+            command_age=self.command_age(), stale=self.stale,
+            saturation=float(self.saturation),
+            twist_command=tuple(float(v) for v in self.twist_command),
+            estimator=odo.estimator, distance=float(odo.distance),
+            residual=tuple(float(v) for v in np.asarray(odo.residual)),
+            slipping=tuple(self.slip_monitor.slipping(reading.stamp))
+            if reading is not None else (),
+            slip_threshold=self.slip_monitor.limits.threshold,
+            drift_findings=None if self.drift is None else tuple(self.drift.findings()),
+            drift_judged=self.drift is not None and self.drift.error is not None,
+            drift_values={} if self.drift is None else dict(self.drift.values()))
 
     # -- the cycle (loop thread) ----------------------------------------------------
     def step(self) -> bool:
@@ -334,10 +393,16 @@ class BaseController:
 
     def _on_fault(self, exc: DriverError) -> None:
         self.counters["driver_errors"] += 1
+        self.raise_fault(str(exc))
+
+    def raise_fault(self, reason: str) -> None:
+        """Fault and stop: zero the joints and disarm the motors. For the
+        cycle's own checks and for callers outside it (an exception in the
+        loop); loop thread only, as :meth:`step`."""
         # The first failure is the cause; what follows while disarmed (the
         # same device still silent, ...) is its consequence.
         if self.fault is None:
-            self.fault = str(exc)
+            self.fault = reason
         self.twist_command = np.zeros(3)
         self._trajectory = None
         self.joint_command[:] = 0.0

@@ -22,7 +22,8 @@ def test_loop_stats_summary_over_the_window_and_since_start():
     stats = LoopStats(window=4)
     assert stats.summary() == {"rate_hz": 0.0, "period_p50_ms": 0.0, "period_p99_ms": 0.0,
                                "period_window_max_ms": 0.0, "period_max_ms": 0.0,
-                               "compute_p99_ms": 0.0, "overruns": 0}
+                               "compute_p99_ms": 0.0, "overruns": 0, "periods_over_2ms": 0,
+                               "periods_over_5ms": 0}
     # six cycles in a window of four: the 9 ms period (second) leaves the
     # window but stays the maximum since start
     for period, compute in ((0.005, 0.001), (0.009, 0.002), (0.004, 0.001),
@@ -41,6 +42,8 @@ def test_loop_stats_summary_over_the_window_and_since_start():
     assert s["compute_p99_ms"] == pytest.approx(
         1e3 * np.percentile([0.001, 0.003, 0.001, 0.0005], 99))
     assert s["overruns"] == 2
+    # since start: 5, 9, 4, 6, 5, 4 ms are all over 2 ms; 9 and 6 over 5 ms
+    assert s["periods_over_2ms"] == 6 and s["periods_over_5ms"] == 2
 
 
 def test_a_period_that_is_not_positive_is_refused():
