@@ -218,17 +218,80 @@ def _scale_to_coverage(inside, groups) -> float:
     return hi
 
 
+def _band_loss(fractions: np.ndarray) -> float:
+    """How far per-floor coverages are from 95 %: squared, 4x heavier below
+    95 % (over-confidence misleads a fusion filter; over-coverage only costs
+    it weight), and 100x heavier below the band's 90 %."""
+    d = fractions - TARGET_COVERAGE
+    return float(np.sum(np.where(d < 0.0, 4.0, 1.0) * d * d)
+                 + 100.0 * np.sum(np.maximum(BAND[0] - fractions, 0.0) ** 2))
+
+
+def _coverage_search(inside, c0: np.ndarray, natural: np.ndarray, groups) -> np.ndarray:
+    """Coefficients c >= 0 that bring every group's (floor's) coverage
+    closest to 95 % (:func:`_band_loss`), searched on a grid.
+
+    Why not the likelihood plus one scale: with floors whose errors differ
+    tenfold, one scale of the likelihood's shape must over-cover the good
+    floors to cover the bad one; only the *mix* of terms (distance against
+    slip residual) can tell floors apart, so the mix is searched for
+    coverage directly. ``inside(c)`` -> boolean array over the samples;
+    ``c0``: the likelihood fit, scaled; ``natural``: per coefficient, the
+    value at which its basis alone explains the mean squared error (the
+    grid's centre for a coefficient the likelihood drove to 0). Grid: 0 and
+    4 decades around the centre, 4 points per decade; then one common scale
+    refined between 1/2 and 2.
+    """
+    labels = list(dict.fromkeys(groups.tolist()))
+    masks = [groups == g for g in labels]
+
+    def loss(c):
+        hit = inside(c)
+        return _band_loss(np.array([np.mean(hit[m]) for m in masks]))
+
+    centre = np.where(c0 > 0.0, c0, natural)
+    axes = [np.concatenate(([0.0], ck * np.logspace(-3.0, 1.0, 17))) for ck in centre]
+    best, best_loss = c0, loss(c0)
+    for point in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(c0)):
+        if not point.any():
+            continue
+        value = loss(point)
+        if value < best_loss:
+            best, best_loss = point, value
+    for f in np.geomspace(0.5, 2.0, 41):
+        value = loss(best * f)
+        if value < best_loss - 1e-15:
+            best, best_loss = best * f, value
+    return np.asarray(best, float)
+
+
+def _natural(bases: np.ndarray, err2: np.ndarray) -> np.ndarray:
+    """Per basis column, the coefficient that alone explains mean(err2)."""
+    return err2.mean() / np.maximum(bases.mean(axis=0), 1e-300)
+
+
 def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
-    """Coefficients of OdometryNoise calibrated on ``samples``."""
+    """Coefficients of OdometryNoise calibrated on ``samples``.
+
+    One floor (slip condition) in the samples: the likelihood fit, scaled
+    so that 95 % of the samples lie in the 95 % region. Several floors: the
+    pose terms' mix searched so that every floor comes closest to 95 %
+    (:func:`_coverage_search`); the twist keeps the scaled likelihood fit
+    (its errors are the filter's lag, alike on every floor).
+    """
     e = samples.error
+    g = samples.condition
+    several = len(set(g.tolist())) > 1
     # heading: P22 = sum_k c_k B_k22
     h_bases = np.stack([samples.bases[k][:, 2, 2] for k in HEADING_KEYS], axis=1)
 
     h = _fit_variances(h_bases, e[:, 2] ** 2)
     hvar = h_bases @ h
-    g = samples.condition
     s = _scale_to_coverage(lambda f: np.abs(e[:, 2]) <= Z_95 * np.sqrt(f * hvar), g)
     h = h * s
+    if several:
+        h = _coverage_search(lambda c: np.abs(e[:, 2]) <= Z_95 * np.sqrt(h_bases @ c), h,
+                             _natural(h_bases, e[:, 2] ** 2), g)
     noise = replace(start, **dict(zip(HEADING_KEYS, h.tolist())))
     # position, with the heading's contribution fixed
     fixed = sum(getattr(noise, k) * samples.bases[k] for k in HEADING_KEYS)[:, :2, :2]
@@ -237,7 +300,13 @@ def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
     p = _fit_covariances(fixed, p_bases, e[:, :2])
     s = _scale_to_coverage(lambda f: mahalanobis2(
         e[:, :2], fixed + f * sum(ci * b for ci, b in zip(p, p_bases))) <= CHI2_2_95, g)
-    noise = replace(noise, **dict(zip(POSITION_KEYS, (p * s).tolist())))
+    p = p * s
+    if several:
+        traces = np.stack([b[:, 0, 0] + b[:, 1, 1] for b in p_bases], axis=1)
+        p = _coverage_search(lambda c: mahalanobis2(
+            e[:, :2], fixed + sum(ci * b for ci, b in zip(c, p_bases))) <= CHI2_2_95, p,
+            _natural(traces, np.sum(e[:, :2] ** 2, axis=1)), g)
+    noise = replace(noise, **dict(zip(POSITION_KEYS, p.tolist())))
     # twist, per axis j: var_j = tv_j + gs_j rho^2 + gl_j L_j^2
     te = samples.twist_error
     coeffs = []
@@ -435,13 +504,14 @@ def profile_yaml(noise: OdometryNoise, twist_window: float, header: list) -> str
 
 
 def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = None,
-                   profile_dir: str | None = None, floor_names: dict | None = None,
-                   command: str = "") -> OdometryNoise:
+                   per_floor: bool = False, profile_dir: str | None = None,
+                   floor_names: dict | None = None, command: str = "") -> OdometryNoise:
     """Print the coverage of the config's noise and, with ``fit_noise``:
 
     * one profile for all the recorded floors (the worst floor covered 95 %:
       it over-covers the better floors), its coverage and YAML block;
-    * with recordings of several floors, also one profile per floor, with
+    * with ``per_floor`` and recordings of several floors (conditions), also
+      one profile per floor, with
       its held-out coverage (leave one run out) when a floor has >= 2 runs,
       written to ``profile_dir`` as ``ROBOT_FLOOR.yaml`` params overlays
       (``floor_names``: condition -> short name for the file).
@@ -465,7 +535,7 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
         print(coverage_table(samples, noise))
         print("\ncalibrated parameters (config file, base_controller: ros__parameters:):")
         print(noise_yaml(noise, cfg.twist_window))
-        if len(floors) > 1:
+        if per_floor and len(floors) > 1:
             rows = []
             for floor in floors:
                 sub = samples.subset([floor])

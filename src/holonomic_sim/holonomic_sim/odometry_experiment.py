@@ -349,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
     if recordings:
         from holonomic_sim.odometry_calibration import calibrate_main
         calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot,
-                       profile_dir=args.profiles, floor_names=PROFILE_NAMES,
+                       per_floor=True, profile_dir=args.profiles, floor_names=PROFILE_NAMES,
                        command=" ".join(["holonomic-odometry-experiment",
                                          *(argv if argv is not None else sys.argv[1:])]))
     return 0
