@@ -352,14 +352,41 @@ def held_out(samples: Samples, start: OdometryNoise) -> dict:
     for run in runs:
         noise = fit(samples.subset(runs=[r for r in runs if r != run]), start)
         per_run.append(samples.subset(runs=[run]).coverage(noise))
+    return _pooled(per_run)
+
+
+def held_out_by_seed(samples: Samples, start: OdometryNoise) -> dict:
+    """Leave-one-seed-out coverage of the all-floor profile, per floor.
+
+    For each seed, :func:`fit` over every floor's runs of the other seeds,
+    checked on that seed's run of each floor. Returns floor -> the dict of
+    :func:`held_out`.
+    """
+    seeds = sorted({r.rsplit(" seed ", 1)[1] for r in samples.runs})
+    if len(seeds) < 2:
+        raise ValueError("held-out coverage needs at least 2 seeds")
+    per_floor: dict = {}
+    for seed in seeds:
+        noise = fit(samples.subset(runs=[r for r in samples.runs
+                                         if not r.endswith(f" seed {seed}")]), start)
+        for run in samples.runs:
+            if run.endswith(f" seed {seed}"):
+                one = samples.subset(runs=[run])
+                per_floor.setdefault(one.condition[0], []).append(one.coverage(noise))
+    return {floor: _pooled(cs) for floor, cs in per_floor.items()}
+
+
+def _pooled(per_run: list) -> dict:
+    """Pooled fractions of per-run coverages with their standard errors."""
     n = np.array([c["samples"] for c in per_run], float)
-    out = {"samples": int(n.sum()), "runs": len(runs)}
+    out = {"samples": int(n.sum()), "runs": len(per_run)}
     for key in COMPONENTS:
         f = np.array([c[key] for c in per_run])
         p = float(np.sum(f * n) / n.sum())
         out[key] = p
         out[key + "_se_samples"] = math.sqrt(max(p * (1.0 - p), 1e-12) / n.sum())
-        out[key + "_se_runs"] = float(np.std(f, ddof=1) / math.sqrt(len(f)))
+        out[key + "_se_runs"] = (float(np.std(f, ddof=1) / math.sqrt(len(f)))
+                                 if len(f) > 1 else float("nan"))
     return out
 
 
@@ -376,8 +403,8 @@ def band_table(rows: list) -> str:
             p = c[key]
             flag = " " if BAND[0] <= p <= BAND[1] else "!"
             cells.append(f"{100 * p:5.1f}\u00b1{100 * c[key + '_se_runs']:4.1f}{flag}")
-        lines.append(f"{label:32s} {c['runs']:4d} {c['samples']:7d} "
-                     f"{100 * c['position_se_samples']:4.1f}%  " + "  ".join(cells))
+        lines.append((f"{label:32s} {c['runs']:4d} {c['samples']:7d} "
+                      f"{100 * c['position_se_samples']:4.1f}%  " + "  ".join(cells)).rstrip())
     return "\n".join(lines)
 
 
@@ -536,6 +563,10 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
         print("\ncalibrated parameters (config file, base_controller: ros__parameters:):")
         print(noise_yaml(noise, cfg.twist_window))
         if per_floor and len(floors) > 1:
+            if len({r.rsplit(" seed ", 1)[-1] for r in samples.runs}) >= 2:
+                print("\nthe all-floor profile, held out (each seed's runs against the profile "
+                      "fitted on the other seeds' runs of every floor):")
+                print(band_table(list(held_out_by_seed(samples, start).items())))
             rows = []
             for floor in floors:
                 sub = samples.subset([floor])
