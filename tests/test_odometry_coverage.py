@@ -54,13 +54,15 @@ def _median_error_over_sigma(s, noise):
 def test_xr4000_defaults_cover_an_ordinary_floor(xr4000_uneven):
     rec, s = xr4000_uneven
     cover = s.coverage(rec.config.controller.noise)
-    # measured on this drive: MEASURED_XR
+    # measured on this drive: position 99.4 %, heading 99.4 %, vx 97.7 %,
+    # vy 96.6 %, wz 96.0 % (the calibration's uneven runs: 99.2 / 99.4 / 96.2 /
+    # 95.8 / 96.9 %)
     for key in ("position", "heading", "vx", "vy", "wz"):
         assert 0.8 <= cover[key] <= 1.0, (key, cover)
     # |error| / sigma for errors that match the covariance is chi-distributed
     # with 2 degrees of freedom: median 1.18. The pre-calibration model's
-    # sigma was 60-80x the error (median ~0.015). Measured MEASURED_XR_RATIO
-    assert 0.1 < _median_error_over_sigma(s, rec.config.controller.noise) < 3.0
+    # sigma was 60-80x the error (median ~0.015). Measured 0.52 on this drive
+    assert 0.2 < _median_error_over_sigma(s, rec.config.controller.noise) < 3.0
 
 
 def test_a_ddrot_cannot_see_slip_its_residual_is_zero(hamr_slippery):

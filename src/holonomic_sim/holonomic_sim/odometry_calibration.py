@@ -410,14 +410,14 @@ def band_table(rows: list) -> str:
 
 def coverage_table(samples: Samples, noise: OdometryNoise) -> str:
     """Coverage per condition and pooled (percent)."""
-    head = (f"{'condition':26s} {'samples':>7s} {'position':>8s} {'heading':>8s} "
+    head = (f"{'condition':32s} {'samples':>7s} {'position':>8s} {'heading':>8s} "
             f"{'vx':>6s} {'vy':>6s} {'wz':>6s}")
     lines = [head, "-" * len(head)]
     groups = list(dict.fromkeys(samples.condition.tolist())) + ["all"]
     for group in groups:
         mask = None if group == "all" else samples.condition == group
         c = samples.coverage(noise, mask)
-        lines.append(f"{group:26s} {c['samples']:7d} {100 * c['position']:7.1f}% "
+        lines.append(f"{group:32s} {c['samples']:7d} {100 * c['position']:7.1f}% "
                      f"{100 * c['heading']:7.1f}% {100 * c['vx']:5.1f}% {100 * c['vy']:5.1f}% "
                      f"{100 * c['wz']:5.1f}%")
     return "\n".join(lines)
