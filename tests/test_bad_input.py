@@ -101,6 +101,7 @@ ODOMETRY_EXPERIMENT = [
     (["--condition", "wet"], "expected one of nominal, uneven, slippery, worn"),
     (["--json", "{file}/x/trials.json"], "--json: cannot write"),
     (["--profiles", "out"], "--profiles needs --calibrate"),
+    (["--calibrate", "--profiles", "{file}/x"], "--profiles: cannot create the folder"),
 ]
 
 TORQUE_EXPERIMENT = [

@@ -38,6 +38,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -319,6 +320,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.profiles and not args.calibrate:
         parser.error("--profiles needs --calibrate")
+    if args.profiles:
+        try:    # before the runs, not after them
+            os.makedirs(args.profiles, exist_ok=True)
+        except OSError as exc:
+            parser.error(f"--profiles: cannot create the folder {args.profiles!r}: "
+                         f"{exc.strerror}")
     try:
         drive_overrides = parse_overrides(args.param)
     except ValueError as exc:
