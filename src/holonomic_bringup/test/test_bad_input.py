@@ -100,6 +100,8 @@ ODOMETRY_EXPERIMENT = [
     (["--duration", "-5"], "--duration: expected a number in (0, 3600] s"),
     (["--condition", "wet"], "expected one of nominal, uneven, slippery, worn"),
     (["--json", "{file}/x/trials.json"], "--json: cannot write"),
+    (["--profiles", "out"], "--profiles needs --calibrate"),
+    (["--calibrate", "--profiles", "{file}/x"], "--profiles: cannot create the folder"),
 ]
 
 TORQUE_EXPERIMENT = [

@@ -148,39 +148,41 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("enable_on_start", "bool",
               "Arm the motors at start. Default false: motors start disarmed and "
               "~/enable arms them.", default=False),
-    # defaults: the XR4000's calibration, holonomic-odometry-experiment --calibrate
-    # (docs/odometry_experiment.md)
+    # defaults: the XR4000's all-floor profile on the drive model (config/xr4000.yaml):
+    # holonomic-odometry-experiment --robot xr4000 --seeds 5 --duration 40 --condition
+    # drives-nominal --condition drives-uneven --condition drives-slippery --condition
+    # drives-worn --calibrate (docs/odometry_experiment.md)
     ParamSpec("odometry.twist_window", "double",
               "Span of the encoder readings whose least-squares line gives the published "
               "twist [s]; it lags a ramp by half of it; 0: the last two readings.",
               default=0.03, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.linear_variance_per_meter", "double",
               "Position variance added per metre travelled [m^2/m].",
-              default=5.31e-12, minimum=0.0, maximum=1.0),
+              default=0.0, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.angular_variance_per_radian", "double",
               "Heading variance added per radian turned [rad^2/rad].",
-              default=8.1e-4, minimum=0.0, maximum=1.0),
+              default=5.26e-6, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.angular_variance_per_meter", "double",
               "Heading variance added per metre travelled [rad^2/m].",
-              default=1.35e-11, minimum=0.0, maximum=1.0),
+              default=0.0, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.slip_position_gain", "double",
               "Position variance added per squared RMS contact residual the estimator could "
               "not explain, per second [s] (m^2 per (m/s)^2 s).",
-              default=0.0, minimum=0.0, maximum=1e4),
+              default=0.327, minimum=0.0, maximum=1e4),
     ParamSpec("odometry.slip_heading_gain", "double",
               "Heading variance added per squared RMS contact residual, per second [s/m^2] "
-              "(rad^2 per (m/s)^2 s).", default=0.0, minimum=0.0, maximum=1e6),
+              "(rad^2 per (m/s)^2 s).", default=2.18, minimum=0.0, maximum=1e6),
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
               "[(m/s)^2, (m/s)^2, (rad/s)^2].",
-              default=(6.84e-6, 3.45e-6, 1e-9), minimum=0.0, maximum=100.0, min_length=3),
+              default=(8.39e-6, 5.71e-6, 3.77e-5), minimum=0.0, maximum=100.0, min_length=3),
     ParamSpec("odometry.twist_slip_gain", "double_array",
               "Twist variance (vx, vy, wz) added per (m/s)^2 of squared RMS contact residual "
-              "[-, -, 1/m^2].", default=(0.627, 0.545, 19.5), minimum=0.0, maximum=1e4,
+              "[-, -, 1/m^2].", default=(0.268, 0.254, 6.97), minimum=0.0, maximum=1e4,
               min_length=3),
     ParamSpec("odometry.twist_lag_gain", "double_array",
               "Twist variance (vx, vy, wz) added per squared lag error of the axis, "
-              "(acceleration x half the twist window)^2 [-].", default=(0.484, 0.509, 1.08),
+              "(acceleration x half the twist window)^2 [-].", default=(1.23, 1.27, 1.9),
               minimum=0.0, maximum=1e4, min_length=3),
     ParamSpec("diagnostics.slip_threshold", "double",
               "Odometry residual of one caster above which it counts as slipping [m/s].",

@@ -41,8 +41,9 @@ from holonomic_core.se2 import compose_arc, wrap_angle
 
 @dataclass(frozen=True)
 class OdometryNoise:
-    """Odometry error model (the defaults: ``--calibrate`` on the XR4000 in
-    the simulator; see docs/odometry_experiment.md).
+    """Odometry error model (the defaults: the XR4000's all-floor profile,
+    ``holonomic-odometry-experiment --calibrate`` on the drive model, the
+    command in config/xr4000.yaml; see docs/odometry_experiment.md).
 
     Per increment that moves the base by ``dist`` [m] and turns it by
     ``dtheta`` [rad] while the estimator leaves ``rho`` [m/s] of contact
@@ -67,14 +68,14 @@ class OdometryNoise:
     ``twist_lag_gain`` is [-].
     """
 
-    linear_variance_per_meter: float = 5.31e-12
-    angular_variance_per_radian: float = 8.1e-4
-    angular_variance_per_meter: float = 1.35e-11
-    slip_position_gain: float = 0.0
-    slip_heading_gain: float = 0.0
-    twist_variance: tuple[float, float, float] = (6.84e-6, 3.45e-6, 1e-9)
-    twist_slip_gain: tuple[float, float, float] = (0.627, 0.545, 19.5)
-    twist_lag_gain: tuple[float, float, float] = (0.484, 0.509, 1.08)
+    linear_variance_per_meter: float = 0.0
+    angular_variance_per_radian: float = 5.26e-6
+    angular_variance_per_meter: float = 0.0
+    slip_position_gain: float = 0.327
+    slip_heading_gain: float = 2.18
+    twist_variance: tuple[float, float, float] = (8.39e-6, 5.71e-6, 3.77e-5)
+    twist_slip_gain: tuple[float, float, float] = (0.268, 0.254, 6.97)
+    twist_lag_gain: tuple[float, float, float] = (1.23, 1.27, 1.9)
 
 
 class Odometry:

@@ -38,6 +38,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -71,12 +72,23 @@ CONDITIONS = {
                                  **_DRIVES},
     "drives, uneven (mu 0.8 +-40 %)": {"sim.wheel_friction": 0.8, "sim.friction_spread": 0.4,
                                        **_DRIVES},
+    "drives, slippery (mu 0.3 +-30 %)": {"sim.wheel_friction": 0.3, "sim.friction_spread": 0.3,
+                                         **_DRIVES},
+    "drives, worn tyres (r +-2 %)": {"sim.wheel_friction": 1.0, "sim.friction_spread": 0.0,
+                                     "sim.wheel_radius_spread": 0.02, **_DRIVES},
 }
 #: short name on the command line -> the condition's full name
 CONDITION_KEYS = {"nominal": "nominal (mu 1.0)", "uneven": "uneven (mu 0.8 +-40 %)",
                   "slippery": "slippery (mu 0.3 +-30 %)", "worn": "worn tyres (r +-2 %)",
                   "drives-nominal": "drives, nominal (mu 1.0)",
-                  "drives-uneven": "drives, uneven (mu 0.8 +-40 %)"}
+                  "drives-uneven": "drives, uneven (mu 0.8 +-40 %)",
+                  "drives-slippery": "drives, slippery (mu 0.3 +-30 %)",
+                  "drives-worn": "drives, worn tyres (r +-2 %)"}
+
+#: condition -> the floor's name in a profile file (ROBOT_FLOOR.yaml): the
+#: drive model is the simulator's default, so its floors get the plain names
+PROFILE_NAMES = {full: key.removeprefix("drives-") if key.startswith("drives-")
+                 else f"ideal-{key}" for key, full in CONDITION_KEYS.items()}
 
 
 def condition_name(text: str) -> str:
@@ -303,7 +315,19 @@ def main(argv: list[str] | None = None) -> int:
                         help="print the coverage of the config's own covariance parameters")
     parser.add_argument("--plot", type=output_file, metavar="PNG",
                         help="with --calibrate/--check: error against sigma, written to PNG")
+    parser.add_argument("--profiles", metavar="DIR",
+                        help="with --calibrate and several conditions: write one covariance "
+                             "profile per floor to DIR/ROBOT_FLOOR.yaml (a params file for "
+                             "holonomic-bringup --params-file)")
     args = parser.parse_args(argv)
+    if args.profiles and not args.calibrate:
+        parser.error("--profiles needs --calibrate")
+    if args.profiles:
+        try:    # before the runs, not after them
+            os.makedirs(args.profiles, exist_ok=True)
+        except OSError as exc:
+            parser.error(f"--profiles: cannot create the folder {args.profiles!r}: "
+                         f"{exc.strerror}")
     try:
         drive_overrides = parse_overrides(args.param)
     except ValueError as exc:
@@ -333,7 +357,10 @@ def main(argv: list[str] | None = None) -> int:
             json.dump([t.__dict__ for t in trials], handle, indent=1)
     if recordings:
         from holonomic_sim.odometry_calibration import calibrate_main
-        calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot)
+        calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot,
+                       per_floor=True, profile_dir=args.profiles, floor_names=PROFILE_NAMES,
+                       command=" ".join(["holonomic-odometry-experiment",
+                                         *(argv if argv is not None else sys.argv[1:])]))
     return 0
 
 
