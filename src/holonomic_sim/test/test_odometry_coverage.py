@@ -16,12 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holonomic_core.controller import load_config
-from holonomic_core.model import read_params_file
+from holonomic_core.config import load_config, read_params_file
 from holonomic_sim.odometry_calibration import Samples, mahalanobis2
 from holonomic_sim.odometry_experiment import record_run
 
-PROFILES = Path(__file__).resolve().parents[1] / "config" / "odometry"
+PROFILES = Path(__file__).resolve().parents[3] / "config" / "odometry"
 HAMR_LIMITS = {"speed": 1.2, "acceleration": 1.0}
 
 
