@@ -5,6 +5,7 @@ drive failure stops all motors within two control cycles, names the
 device, and blocks motion until the fault is gone and the base is re-armed.
 """
 
+import functools
 import math
 import struct
 import time
@@ -386,6 +387,24 @@ def test_cia402_torque_mode_sends_rpdo2_with_cst_and_scaled_torque(rig_factory):
                for d in rig.devices)
 
 
+def _rig_played_by_the_test(rig_factory):
+    """An armed cia402 HAMR rig whose emulated drives have stopped: the test
+    answers for them. Returns (rig, time.time() - time.monotonic())."""
+    rig = rig_factory("cia402", "hamr", **unhurried("cia402"))
+    assert rig.arm() == (True, "motors armed")
+    rig.run(0.05)
+    rig.emulators.stop()
+    return rig, time.time() - time.monotonic()
+
+
+def _answer_every_drive(rig, arrived: float, counts: int) -> None:
+    """Each drive's status (OPERATION ENABLED) and feedback (``counts``, 0
+    speed) as if they reached the bus at ``arrived`` [s, wall clock]."""
+    for node in rig.node_ids:
+        rig.driver.on_frame(0x280 + node, struct.pack("<HH", 0x0237, 0), arrived)
+        rig.driver.on_frame(0x180 + node, struct.pack("<ii", counts, 0), arrived)
+
+
 def test_cia402_sample_is_stamped_with_the_sync_it_answers_even_when_handled_late(rig_factory):
     """A TPDO1 that arrived (bus timestamp) after SYNC A but is handled only
     after SYNC B was sent -- the receiving thread starved -- holds what the
@@ -394,17 +413,11 @@ def test_cia402_sample_is_stamped_with_the_sync_it_answers_even_when_handled_lat
     false encoder glitch and a spike in the odometry's twist.) Unhurried
     deadlines: a loaded machine can stretch the 20 ms between the SYNCs past
     the 50 ms feedback_timeout, and the driver then waits for fresh PDOs."""
-    rig = rig_factory("cia402", "hamr", **unhurried("cia402"))
-    assert rig.arm() == (True, "motors armed")
-    rig.run(0.05)
-    rig.emulators.stop()                      # from here on, this test plays the drives
+    rig, wall_minus_clock = _rig_played_by_the_test(rig_factory)
     driver = rig.driver
-    wall_minus_clock = time.time() - time.monotonic()
 
     def answer(arrived):
-        for node in rig.node_ids:
-            driver.on_frame(0x280 + node, struct.pack("<HH", 0x0237, 0), arrived)
-            driver.on_frame(0x180 + node, struct.pack("<ii", 1000, 0), arrived)
+        _answer_every_drive(rig, arrived, 1000)
 
     mark = len(rig.sniff())
     driver.read()                             # ... and SYNC A
@@ -427,17 +440,9 @@ def test_cia402_answer_handled_after_a_long_stall_keeps_its_sync(rig_factory):
     arrived before every SYNC of a full record is no sample: the reading
     stays what it was and the answer is counted."""
     from holonomic_drivers.cia402 import SYNC_RECORD
-    rig = rig_factory("cia402", "hamr", **unhurried("cia402"))
-    assert rig.arm() == (True, "motors armed")
-    rig.run(0.05)
-    rig.emulators.stop()                      # from here on, this test plays the drives
+    rig, wall_minus_clock = _rig_played_by_the_test(rig_factory)
     driver = rig.driver
-    wall_minus_clock = time.time() - time.monotonic()
-
-    def answer(arrived, counts):
-        for node in rig.node_ids:
-            driver.on_frame(0x280 + node, struct.pack("<HH", 0x0237, 0), arrived)
-            driver.on_frame(0x180 + node, struct.pack("<ii", counts, 0), arrived)
+    answer = functools.partial(_answer_every_drive, rig)
 
     mark = len(rig.sniff())
     for _ in range(61):
