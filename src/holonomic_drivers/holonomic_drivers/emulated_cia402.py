@@ -65,9 +65,9 @@ TWO_PI = 2.0 * math.pi
 ABORT_CANNOT_MAP = 0x06040041
 ABORT_PDO_TOO_LONG = 0x06040042
 ABORT_VALUE_RANGE = 0x06090030
-#: objects the drive writes itself (read-only to the master)
 #: motor states kept per axis (about 2 s of 1 ms steps)
 _HISTORY = 2048
+#: objects the drive writes itself (read-only to the master)
 _OWN_OBJECTS = frozenset((co.STATUSWORD, co.POSITION_ACTUAL, co.VELOCITY_ACTUAL,
                           co.MODES_DISPLAY, co.ERROR_CODE, co.ERROR_REGISTER))
 
