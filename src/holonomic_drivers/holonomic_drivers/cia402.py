@@ -828,7 +828,11 @@ class Cia402Driver(CanDriver):
             for node, kind in self._watchdog_kind.items():
                 if kind == "guarding":
                     self._send(co.HEARTBEAT + node, b"", remote=True)
-        # both clocks as the SYNC leaves (the drives sample then)
+        self._send_sync()
+
+    def _send_sync(self) -> None:
+        """A SYNC, recorded with both clocks as it leaves (the drives sample
+        then; ``_answered_sync`` places their answers with it)."""
         sent = time.monotonic()
         self._sync_time = sent
         with self._lock:
@@ -855,7 +859,7 @@ class Cia402Driver(CanDriver):
             except DriverCommunicationError as exc:
                 failure = failure or exc
         try:
-            self._send(co.SYNC, b"")
+            self._send_sync()
         except DriverCommunicationError as exc:
             failure = failure or exc
         if failure is not None:
