@@ -69,7 +69,9 @@ def unhurried(backend: str) -> dict:
     """Deadlines of a test about the mapping, not about deadlines (the
     failure tests below check those): the emulated drives are threads of
     this process, so when the OS starves the whole process (measured: the
-    loop's longest gap 433 ms, with the machine at load 13) they fall silent
+    loop's and the emulator's longest gaps 140-230 ms at load 3, 433 ms at
+    load 13, seconds at load 20; a 50 ms heartbeat then misses a 200 ms
+    timeout: 7 of 8 comr3 runs at load 3) they fall silent
     with it, and the first check after the stall would count their silence
     against them -- on a real bus the drives keep answering. 2 s is ~5x the
     longest stall measured."""
