@@ -79,10 +79,12 @@ def test_odometry_stays_within_0_2_percent_of_distance_over_20_s(hamr):
     # (0.044 %), heading 0.0018 rad; bounds ~5x that: a kinematic or
     # odometry error of a fraction of a percent fails
     assert error <= 0.002 * distance, (error, distance)
-    # heading: 0.0018 rad on the branch that set these bounds, 0.0136 rad in
-    # the fresh-clone CI run after the merge (2026-11-26; cause not found yet
-    # -- the floor-origin ground truth and the windowed twist are suspects)
-    assert heading < 0.03, heading
+    # heading, measured at 7abb383 (2026-11-26, 11 runs of this script: alone,
+    # in the whole file, with two busy loops beside, on the drive model, on
+    # Python 3.12): 0.0003-0.0027 rad; bound ~4x the largest. (The 0.0136 of
+    # one fresh-clone CI run was not reproduced; the code it ran differs from
+    # this only in torque mode, which HAMR does not use.)
+    assert heading < 0.01, heading
 
 
 

@@ -129,3 +129,27 @@ def test_a_stalled_cycle_counts_as_an_overrun():
     loop.stop()
     assert loop.stats.overruns >= 1
     assert loop.stats.max_period >= 0.2
+
+
+def test_loop_stats_window_default_and_partial_window_and_zero_periods():
+    """By hand: the default window holds 2000 cycles (cycle 2001 overwrites
+    the first); a window not yet full averages only the cycles seen; no
+    overrun before one is counted; a window of zero periods (a clock that
+    did not move) reports 0 Hz, not inf."""
+    stats = LoopStats()
+    assert stats.summary()["overruns"] == 0
+    stats.add(1.0, 0.0)                      # one slow cycle, then 2000 of 5 ms
+    for _ in range(2000):
+        stats.add(0.005, 0.0)
+    s = stats.summary()
+    assert s["rate_hz"] == pytest.approx(200.0)           # the 1 s cycle left the window
+    assert s["period_window_max_ms"] == pytest.approx(5.0)
+    assert s["period_max_ms"] == pytest.approx(1000.0)   # ... but not the maximum since start
+    assert s["overruns"] == 0
+    partial = LoopStats(window=10)
+    partial.add(0.004, 0.0)
+    partial.add(0.006, 0.0)
+    assert partial.summary()["rate_hz"] == pytest.approx(200.0)   # mean 5 ms of 2 cycles
+    still = LoopStats(window=3)
+    still.add(0.0, 0.0)
+    assert still.summary()["rate_hz"] == 0.0

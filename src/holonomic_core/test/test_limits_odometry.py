@@ -180,3 +180,25 @@ def test_pose_covariance_grows_with_distance_and_resets():
     # after a reset the next reading is the new reference: no jump
     odo.update(q, t + 0.01)
     assert np.all(odo.pose == 0.0)
+
+
+def test_compose_arc_is_the_chord_of_the_constant_twist_arc():
+    """By hand: a constant body twist (dx, dy) per unit time with a turn of
+    dtheta moves the body, in its start frame, by V (dx, dy) with
+    V = [[sin t / t, -(1 - cos t) / t], [(1 - cos t) / t, sin t / t]], then
+    rotated by the start heading. A quarter turn (t = pi/2): sin t / t =
+    (1 - cos t) / t = 2 / pi."""
+    k = 2.0 / math.pi
+    assert compose_arc((0.0, 0.0, 0.0), 1.0, 0.0, math.pi / 2) == pytest.approx((k, k))
+    assert compose_arc((0.0, 0.0, 0.0), 0.0, 1.0, math.pi / 2) == pytest.approx((-k, k))
+    # started at heading pi/2: the body-frame (k, k) is (-k, k) in the world
+    assert compose_arc((5.0, -3.0, math.pi / 2), 1.0, 0.0, math.pi / 2) == pytest.approx((-k, k))
+    # below 1e-6 rad the series: sin t / t = 1 - t^2 / 6, (1 - cos t) / t = t / 2,
+    # exact to float rounding against the closed forms (t = 9e-7: the t^2 / 6
+    # term is 1.35e-13, a 1/7 in its place would be 1.9e-14 off)
+    t = 9e-7
+    x, y = compose_arc((0.0, 0.0, 0.0), 1.0, 0.0, t)
+    assert x == pytest.approx(math.sin(t) / t, rel=0, abs=2e-15)
+    # (1 - cos t) / t = t / 2 - t^3 / 24: t / 2 to 1e-13 relative (the
+    # closed form itself loses 4 digits to cancellation here)
+    assert y == pytest.approx(t / 2, rel=1e-9)

@@ -88,6 +88,8 @@ from holonomic_drivers.cia402_protocol import Control, OpMode, State
 
 PREFIX = "cia402"
 _MODES = {"csv": OpMode.CYCLIC_SYNCHRONOUS_VELOCITY, "pv": OpMode.PROFILE_VELOCITY}
+#: [s] how far back the SYNCs sent are kept to place a late-handled answer
+SYNC_RECORD = 2.0
 _log = logging.getLogger(__name__)
 
 #: what each PDO carries: (profile object, sub) in order
@@ -322,11 +324,18 @@ class Cia402Driver(CanDriver):
         self._nodes: dict[int, canopen.RemoteNode] = {}
         self._next_master_heartbeat = -math.inf
         self._sync_time = -math.inf
-        #: (wall clock, driver clock) [s] of the last SYNCs sent, newest last
-        self._syncs: deque[tuple[float, float]] = deque(maxlen=16)
+        #: (wall clock, driver clock) [s] of the SYNCs sent over the last
+        #: SYNC_RECORD seconds, newest last: an answer handled after a stall of
+        #: this thread must still find the SYNC it answers (16 SYNCs, 80 ms
+        #: at 200 Hz, were shorter than a 0.2 s feedback_timeout allows, and
+        #: shorter than the 50 ms default at 1 kHz: such an answer was stamped
+        #: with the newest SYNC, a stall late, and read as an encoder glitch)
+        self._syncs: deque[tuple[float, float]] = deque(
+            maxlen=max(16, math.ceil(SYNC_RECORD * control_rate)))
         #: the last reading returned (a cycle with nothing new repeats it)
         self._last_reading: JointReading | None = None
-        self.counters = {"bad_frames": 0, "emcy": 0, "syncs": 0, "frames_sent": 0}
+        self.counters = {"bad_frames": 0, "emcy": 0, "syncs": 0, "frames_sent": 0,
+                         "unplaced_answers": 0}
 
     def _eds_key(self, i: int) -> str:
         joint_key = f"{PREFIX}.joints.{self.joints.joint_names[i]}.eds"
@@ -819,7 +828,11 @@ class Cia402Driver(CanDriver):
             for node, kind in self._watchdog_kind.items():
                 if kind == "guarding":
                     self._send(co.HEARTBEAT + node, b"", remote=True)
-        # both clocks as the SYNC leaves (the drives sample then)
+        self._send_sync()
+
+    def _send_sync(self) -> None:
+        """A SYNC, recorded with both clocks as it leaves (the drives sample
+        then; ``_answered_sync`` places their answers with it)."""
         sent = time.monotonic()
         self._sync_time = sent
         with self._lock:
@@ -846,7 +859,7 @@ class Cia402Driver(CanDriver):
             except DriverCommunicationError as exc:
                 failure = failure or exc
         try:
-            self._send(co.SYNC, b"")
+            self._send_sync()
         except DriverCommunicationError as exc:
             failure = failure or exc
         if failure is not None:
@@ -921,16 +934,24 @@ class Cia402Driver(CanDriver):
         last SYNC sent *now* is wrong for an answer handled late -- this
         thread starved, frames queued: that sample would be stamped a cycle
         or a stall late, and the next one would seem to move that far in no
-        time.) Without an arrival time: the last SYNC sent."""
+        time.) Without an arrival time: the last SYNC sent. None: it arrived
+        before every SYNC of a full record (SYNC_RECORD seconds ago): which
+        SYNC it answers is unknown."""
         if arrived:
             for wall, clock in reversed(self._syncs):
                 if wall <= arrived:
                     return clock
+            if len(self._syncs) == self._syncs.maxlen:
+                return None
         return self._sync_time
 
-    def _on_feedback(self, i: int, data: bytes, now: float, sampled: float) -> None:
+    def _on_feedback(self, i: int, data: bytes, now: float, sampled: float | None) -> None:
         d = self._drives[i]
         position, velocity = self._decode(i, self._wiring[i].feedback, data)
+        if sampled is None:
+            # a sample of unknown time is no sample: the next answer is read
+            self.counters["unplaced_answers"] += 1
+            return
         if sampled != d.sample_time:
             d.previous = (d.position, d.velocity, d.sample_time)
         d.position, d.velocity = position, velocity

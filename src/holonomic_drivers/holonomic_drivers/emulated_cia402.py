@@ -39,10 +39,12 @@ Failure injection: ``silent`` (no frame leaves the device), ``sdo_silent``
 
 from __future__ import annotations
 
+import bisect
 import math
 import threading
 import time
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import can
@@ -63,6 +65,8 @@ TWO_PI = 2.0 * math.pi
 ABORT_CANNOT_MAP = 0x06040041
 ABORT_PDO_TOO_LONG = 0x06040042
 ABORT_VALUE_RANGE = 0x06090030
+#: motor states kept per axis (about 2 s of 1 ms steps)
+_HISTORY = 2048
 #: objects the drive writes itself (read-only to the master)
 _OWN_OBJECTS = frozenset((co.STATUSWORD, co.POSITION_ACTUAL, co.VELOCITY_ACTUAL,
                           co.MODES_DISPLAY, co.ERROR_CODE, co.ERROR_REGISTER))
@@ -77,6 +81,9 @@ class _Axis:
     state: State = State.SWITCH_ON_DISABLED
     condition: int = 0
     controlword: int = 0
+    #: (wall-clock time [s], motor position [rad], speed [rad/s]) after each
+    #: step, newest last: what the motor did, for sampling at a past SYNC
+    history: deque = field(default_factory=lambda: deque(maxlen=_HISTORY))
 
 
 class _DeviceNetwork(canopen.Network):
@@ -441,7 +448,7 @@ class EmulatedCia402Drive:
         self._syncs += 1
         if self._syncs % self.answer_every:
             return
-        self._update_feedback()
+        self._update_feedback(at)
         if self._dirty:
             self._refresh()
         for cob, kind, entries in self._tpdos:
@@ -473,13 +480,36 @@ class EmulatedCia402Drive:
         if not self.silent:
             self.network.send_message(co.EMCY + self.node_id, co.emcy(error_code))
 
-    def _update_feedback(self) -> None:
+    def _update_feedback(self, at: float) -> None:
         for axis, vres in zip(self.axes, self.velocity_resolution):
             o = axis.objects
+            position, velocity = self._motor_at(axis, at)
             self._put(o, co.STATUSWORD, co.statusword_of(axis.state))
             self._put(o, co.POSITION_ACTUAL, _int32(round(
-                axis.motor.position() / TWO_PI * self.encoder_resolution)))
-            self._put(o, co.VELOCITY_ACTUAL, round(axis.motor.velocity() / TWO_PI * vres))
+                position / TWO_PI * self.encoder_resolution)))
+            self._put(o, co.VELOCITY_ACTUAL, round(velocity / TWO_PI * vres))
+
+    def _motor_at(self, axis: _Axis, at: float) -> tuple[float, float]:
+        """The motor's (position [rad], speed [rad/s]) at ``at`` [s, wall clock].
+
+        A real drive samples the instant the SYNC reaches it. Here the SYNC
+        can reach the device after its motors were stepped past the SYNC's
+        stamp: python-can's virtual bus stamps a frame, then copies it into
+        each receiver's queue in turn, and the sending thread can lose the
+        CPU in between (six drives on one bus: seven copies). Sampling the
+        motor as it is then would report a position up to that delay late
+        under an early stamp -- a jump the driver's glitch check rightly
+        flags. So a SYNC in the past is sampled from the motor's recorded
+        steps (linear between the two around it)."""
+        history = axis.history
+        if not history or at >= history[-1][0]:
+            return axis.motor.position(), axis.motor.velocity()
+        k = bisect.bisect_right(history, at, key=lambda h: h[0])
+        if k == 0:
+            return history[0][1], history[0][2]      # older than the record: its oldest
+        (t0, p0, v0), (t1, p1, v1) = history[k - 1], history[k]
+        w = (at - t0) / (t1 - t0)
+        return p0 + w * (p1 - p0), v0 + w * (v1 - v0)
 
     # -- time --------------------------------------------------------------------------
     def _advance(self, now: float) -> None:
@@ -492,6 +522,7 @@ class EmulatedCia402Drive:
         self._watchdogs(now)
         for axis in self.axes:
             axis.motor.advance(dt)
+            axis.history.append((now, axis.motor.position(), axis.motor.velocity()))
             if axis.state is State.QUICK_STOP_ACTIVE and axis.motor.velocity() == 0.0:
                 axis.state = State.SWITCH_ON_DISABLED      # quick stop option code 2
                 self._put(axis.objects, co.STATUSWORD, co.statusword_of(axis.state))

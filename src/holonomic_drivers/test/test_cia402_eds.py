@@ -37,6 +37,9 @@ DATA = Path(__file__).parent / "data" / "cia402"
 JOINTS = ("left_wheel_joint", "right_wheel_joint", "turret_joint")
 COMMAND = np.array([math.pi, -math.pi, 0.2 * math.pi])
 MOTOR_REV_S = np.array([0.5, 0.5, 1.0])          # see the module docstring
+#: [rad] a wheel turns before the fault: 0.1 s at pi rad/s, i.e. 20 driver
+#: cycles of 5 ms, 640 counts of the 16384-count encoder
+MOVED = 0.1 * math.pi
 #: generous timeouts: these tests check behaviour, not timing, on a loaded machine
 RELAXED = {"cia402.feedback_timeout": 1.0, "cia402.heartbeat_timeout": 2.0,
            "cia402.startup_timeout": 5.0, "cia402.sdo_timeout": 2.0}
@@ -105,6 +108,12 @@ def test_drive_from_its_file_runs_faults_and_stops(rig_factory, eds, overrides):
     run_until(rig, lambda r: np.allclose(r.velocities, COMMAND, atol=1e-6)
               and np.allclose([d.velocity_rev_per_s for d in rig.devices], MOTOR_REV_S,
                               atol=1e-9), velocities=COMMAND)
+    # ... and keep it until the wheels have turned MOVED rad (read back), so
+    # that the position check after the stop compares a real motion: the
+    # motion between enable and the fault alone is 2-4 driver cycles, 0.03 to
+    # 0.15 rad depending on how fast the machine runs them (0.043 measured on
+    # an idle machine, the old bound was 0.05)
+    run_until(rig, lambda r: abs(r.positions[0]) >= MOVED, velocities=COMMAND)
 
     # a fault on the right wheel's drive (over-current 0x2310) is reported by
     # name with its error code (from 0x603F in the PDO, or from the EMCY of
@@ -120,7 +129,7 @@ def test_drive_from_its_file_runs_faults_and_stops(rig_factory, eds, overrides):
     wait_until(lambda: all(d.velocity_rev_per_s == 0.0 for d in rig.devices), what="standstill")
     reading = run_until(rig, lambda r: np.allclose(r.positions, rig.motor_to_joint_positions(),
                                                    atol=2 * math.pi / 16384))
-    assert np.abs(reading.positions).max() > 0.05                  # it did move
+    assert np.abs(reading.positions).max() >= MOVED                 # it did move
 
     # once the condition is gone the drive can be armed again (fault reset)
     rig.devices[1].clear_condition()

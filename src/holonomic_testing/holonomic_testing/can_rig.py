@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import gc
 import itertools
+import math
 import os
 import struct
 import sys
@@ -83,6 +84,8 @@ class CanRig:
         self.cycle_starts: list[float] = []
         #: the odometry's twist after each cycle of ``run``
         self.odometry_twists: list[np.ndarray] = []
+        #: (reading stamp [s], odometry pose [m, m, rad]) after each cycle of ``run``
+        self.odometry_poses: list[tuple[float, np.ndarray]] = []
 
     def configure(self) -> "CanRig":
         self.driver.configure()
@@ -116,6 +119,8 @@ class CanRig:
                 self.controller.set_command(twist)
             self.step()
             self.odometry_twists.append(self.controller.odometry.twist.copy())
+            self.odometry_poses.append((self.controller.reading.stamp,
+                                        self.controller.odometry.pose.copy()))
             count += 1
 
         def on_error(exc: BaseException) -> bool:
@@ -134,9 +139,31 @@ class CanRig:
             raise errors[0]
 
     def mean_odometry_twist(self, seconds: float) -> np.ndarray:
-        """Mean odometry twist over the last ``seconds`` of ``run``."""
-        n = max(1, round(seconds / self.controller.dt))
-        return np.mean(self.odometry_twists[-n:], axis=0)
+        """The constant body twist [m/s, m/s, rad/s] that takes the odometry
+        from its pose read ``seconds`` before its last reading to its last pose,
+        over the time between the two readings' stamps (the SE(2) logarithm
+        of the pose change over that time). Not the mean of the per-cycle
+        twists: each is held until the next sample, so when stamps jitter (a
+        loaded machine) their mean is not the mean velocity."""
+        t1, end = self.odometry_poses[-1]
+        # the newest pose read at least ``seconds`` before the last one (by
+        # the readings' stamps: after a stall of the drives several cycles
+        # repeat a reading)
+        t0, start = next(((t, p) for t, p in reversed(self.odometry_poses)
+                          if t <= t1 - seconds), self.odometry_poses[0])
+        dx, dy = end[0] - start[0], end[1] - start[1]
+        c, s = math.cos(start[2]), math.sin(start[2])
+        x, y = c * dx + s * dy, -s * dx + c * dy          # in the start pose's frame
+        theta = math.remainder(end[2] - start[2], 2 * math.pi)
+        # a constant twist (v, w) for time T moves by V(theta) v T, with
+        # V = [[sin t / t, -(1 - cos t) / t], [(1 - cos t) / t, sin t / t]]
+        if abs(theta) < 1e-9:
+            a, b = 1.0, 0.0
+        else:
+            a, b = math.sin(theta) / theta, (1.0 - math.cos(theta)) / theta
+        det = a * a + b * b
+        vx, vy = (a * x + b * y) / det, (-b * x + a * y) / det
+        return np.array([vx, vy, theta]) / (t1 - t0)
 
     def sniff(self) -> list[can.Message]:
         """Every frame on the bus so far (send time in ``timestamp``)."""
