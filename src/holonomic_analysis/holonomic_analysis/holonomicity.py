@@ -36,7 +36,7 @@ import numpy as np
 from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
-from holonomic_core.se2 import wrap_angle
+from holonomic_core.se2 import rotate, wrap_angle
 from holonomic_core.teleop_script import body_command
 
 
@@ -156,9 +156,9 @@ def time_move(robot, alpha: float, theta: float, distance: float, driver: str = 
                 w = _stop_speed(w_max, alpha_dec, abs(err_heading))
                 vx, vy = (err / dist * v) if dist > 1e-12 else (0.0, 0.0)
                 twist_world = (vx, vy, math.copysign(w, err_heading))
-            cy, sy = math.cos(now_pose[2]), math.sin(now_pose[2])
-            ctrl.set_command((cy * twist_world[0] + sy * twist_world[1],
-                              -sy * twist_world[0] + cy * twist_world[1], twist_world[2]))
+            # the world-frame twist in base_link
+            ctrl.set_command((*rotate(twist_world[0], twist_world[1], -now_pose[2]),
+                              twist_world[2]))
             step()
             if ctrl.fault is not None:
                 raise RuntimeError(f"{cfg.model.name}: the controller faulted during the move "

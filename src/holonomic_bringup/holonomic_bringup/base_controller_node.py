@@ -52,6 +52,7 @@ from holonomic_core.description import generate_urdf
 from holonomic_core.limits import is_finite_twist
 from holonomic_core.link_transforms import LinkTree
 from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_core.se2 import quaternion_of_yaw
 from holonomic_bringup import loop_wire as wire
 from holonomic_bringup.loop_client import LoopClient, LoopLost
 from holonomic_bringup.process_guard import (STOP, InstanceConflict, InstanceLock,
@@ -102,10 +103,9 @@ def _stamp(seconds: float) -> TimeMsg:
 
 
 def _yaw_quaternion(msg_orientation, yaw: float) -> None:
-    msg_orientation.x = 0.0
-    msg_orientation.y = 0.0
-    msg_orientation.z = math.sin(0.5 * yaw)
-    msg_orientation.w = math.cos(0.5 * yaw)
+    """Fill a geometry_msgs Quaternion with the rotation by ``yaw`` [rad] about z."""
+    (msg_orientation.x, msg_orientation.y, msg_orientation.z,
+     msg_orientation.w) = quaternion_of_yaw(yaw)
 
 
 def _fill_covariance(target, cov3: np.ndarray) -> None:

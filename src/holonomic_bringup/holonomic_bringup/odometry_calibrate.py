@@ -20,7 +20,6 @@ specifies); without one (all zeros) the twist coverage is meaningless.
 
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
@@ -30,7 +29,7 @@ from holonomic_bringup.recording_plot import odom_arrays, load
 from holonomic_core.command_line import ArgumentParser
 from holonomic_core.config import config_from_flat
 from holonomic_core.schema import ConfigError
-from holonomic_core.se2 import wrap_angle
+from holonomic_core.se2 import relative_poses, wrap_angle
 
 
 def recording_from_mcap(path: Path, namespace: str = "", reference_topic: str = "ground_truth/odom"):
@@ -63,23 +62,17 @@ def recording_from_mcap(path: Path, namespace: str = "", reference_topic: str = 
     stamps = np.array([t for t, _ in joints])
     positions = np.array([np.asarray(m.position)[order] for _, m in joints])
     t_ref, pose, twist = odom_arrays(reference)
-    # the reference's first pose is the odometry's origin
-    x0, y0, th0 = pose[0]
-    c, s = math.cos(th0), math.sin(th0)
-    rel = np.column_stack((c * (pose[:, 0] - x0) + s * (pose[:, 1] - y0),
-                           -s * (pose[:, 0] - x0) + c * (pose[:, 1] - y0),
-                           np.unwrap(pose[:, 2] - th0)))
+    # the reference's first pose is the odometry's origin; the heading kept
+    # unwrapped for the interpolation below
+    rel = relative_poses(np.broadcast_to(pose[0], pose.shape), pose)
+    rel[:, 2] = np.unwrap(pose[:, 2] - pose[0, 2])
     keep = (stamps >= t_ref[0]) & (stamps <= t_ref[-1])
     stamps, positions = stamps[keep], positions[keep]
     truth = np.column_stack([np.interp(stamps, t_ref, rel[:, k]) for k in range(3)])
     truth[:, 2] = [wrap_angle(v) for v in truth[:, 2]]
     truth_twist = np.column_stack([np.interp(stamps, t_ref, twist[:, k]) for k in range(3)])
     # the odometry starts where the first kept reading is: re-origin the truth there
-    x0, y0, th0 = truth[0]
-    c, s = math.cos(th0), math.sin(th0)
-    dx, dy = truth[:, 0] - x0, truth[:, 1] - y0
-    truth = np.column_stack((c * dx + s * dy, -s * dx + c * dy,
-                             [wrap_angle(v - th0) for v in truth[:, 2]]))
+    truth = relative_poses(np.broadcast_to(truth[0], truth.shape), truth)
     return Recording(cfg.model.name, path.name, 0, cfg, stamps, positions, truth, truth_twist)
 
 
