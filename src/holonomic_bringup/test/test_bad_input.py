@@ -197,3 +197,20 @@ def test_bad_input_gives_one_line_and_exit_2(inputs, tmp_path, program, argv, wo
     assert len(lines) == 1, proc.stderr
     assert words in lines[0], lines[0]
     assert "Traceback" not in proc.stdout + proc.stderr
+
+
+#: every program a user runs from the shell (the node is started by bringup)
+HELP_PROGRAMS = sorted((set(TABLES) - {"base_controller"}) | {"holonomic-calibration-experiment"})
+
+
+@pytest.mark.parametrize("program", HELP_PROGRAMS)
+def test_help_prints_usage_and_exits_0(tmp_path, program):
+    """``--help`` is the first thing a new user types: it prints the usage
+    and every option and exits 0. argparse %-formats each help string, so a
+    literal '%' in one (holonomic-odometry-experiment's condition names,
+    "+-40 %") made --help itself crash with a ValueError."""
+    proc = subprocess.run(command(program) + ["--help"], capture_output=True, text=True,
+                          timeout=120, stdin=subprocess.DEVNULL, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith(f"usage: {program}"), proc.stdout[:200]
+    assert "Traceback" not in proc.stdout + proc.stderr

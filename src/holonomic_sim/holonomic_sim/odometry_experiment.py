@@ -302,7 +302,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--condition", action="append", type=condition_name,
                         metavar="|".join(CONDITION_KEYS),
                         help="slip condition(s), repeatable (default: all): "
-                             + "; ".join(f"{k} = {v}" for k, v in CONDITION_KEYS.items()))
+                             # argparse %-formats help strings: the names' "%" doubled
+                             + "; ".join(f"{k} = {v}" for k, v in CONDITION_KEYS.items())
+                             .replace("%", "%%"))
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
                         help="override a parameter in the drive-model conditions, "
                              "e.g. -p sim.drive.spread:=0.3")
