@@ -133,7 +133,8 @@ def _children(pid: int) -> list[int]:
 _SPLIT_KEYS = ("wake_late_p99_ms", "wake_late_max_ms", "compute_p99_ms", "compute_max_ms",
                "preempted_max_ms", "controller_p99_ms", "controller_max_ms",
                "physics_p99_ms", "physics_max_ms", "state_write_p99_ms",
-               "state_write_max_ms", "status_gc_p99_ms", "status_gc_max_ms")
+               "state_write_max_ms", "status_p99_ms", "status_max_ms", "gc_p99_ms",
+               "gc_max_ms")
 _CAUSE_KEYS = ("over_2ms_woke_late", "over_2ms_compute", "over_2ms_preempted")
 
 
@@ -185,6 +186,10 @@ def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
             time.sleep(0.1)
         if not windows:
             raise RuntimeError("the robot did not publish diagnostics within 30 s")
+        # each window covers the last 2000 cycles (2 s at 1 kHz): measure from
+        # the third message on, so that no window holds the start-up
+        while len(windows) < 3 and time.monotonic() < deadline:
+            time.sleep(0.1)
         if started is not None:
             after = started(proc)
         windows.clear()
