@@ -204,6 +204,20 @@ def format_table(r: dict) -> str:
                    f"stamps p99 {st['p99_ms']:.3f} ms, max {st['max_ms']:.2f} ms, > 2 ms: "
                    f"{st['over_2ms']}, > 5 ms: {st['over_5ms']}; arrivals p99 "
                    f"{ar['p99_ms']:.3f} ms, max {ar['max_ms']:.2f} ms")
+        split = ""
+        if "split" in lp:
+            sp, causes = lp["split"], lp["over_2ms_causes"]
+            parts = ", ".join(f"{name} {sp[name + '_p99_ms']:.3f}/{sp[name + '_max_ms']:.2f}"
+                              for name in ("controller", "physics", "state_write", "status",
+                                           "gc") if name + "_p99_ms" in sp)
+            split = (f"; cycle split p99/max [ms]: woke late {sp['wake_late_p99_ms']:.3f}/"
+                     f"{sp['wake_late_max_ms']:.2f}, compute {sp['compute_p99_ms']:.3f}/"
+                     f"{sp['compute_max_ms']:.2f} (preempted in it up to "
+                     f"{sp['preempted_max_ms']:.2f}), {parts}; periods > 2 ms by cause: woke "
+                     f"late {causes['over_2ms_woke_late']}, preempted "
+                     f"{causes['over_2ms_preempted']}, compute {causes['over_2ms_compute']}; "
+                     f"CPU: node {lp['node_cpu_percent']:.0f} %, loop process "
+                     f"{lp['loop_cpu_percent']:.0f} % of a core")
         # the loop's own counts over the measurement decide "none later than";
         # the windows' max can reach up to 2 s before it (a window spans 2000 cycles)
         if "periods_over_2ms" in lp:
@@ -220,7 +234,7 @@ def format_table(r: dict) -> str:
             f"(median of {lp['windows']} 2-s windows; worst window "
             f"{lp['period_p99_ms_worst_window']:.3f} ms), max {lp['period_max_ms']:.2f} ms "
             f"(the windows'), "
-            f"{lp['overruns']} overruns{over}{out} | p99 ≤ {limit_p99} ms, none later than "
+            f"{lp['overruns']} overruns{over}{out}{split} | p99 ≤ {limit_p99} ms, none later than "
             f"{limit_max:g} ms | {verdict(lp['period_p99_ms_worst_window'] <= limit_p99)} (p99), "
             f"{verdict(none_later)} (max) |")
     la = r["latency"]

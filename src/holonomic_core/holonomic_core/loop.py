@@ -58,6 +58,18 @@ class ManualClock:
         return self.now
 
 
+def _percentile(values: np.ndarray, q: float) -> float:
+    """numpy's default (linear) percentile ``q`` [%] of ``values``, by two
+    partitions: ~10 µs for 2000 values against ~50 µs for ``np.percentile``
+    (the loop computes ten of them once a second, inside a cycle)."""
+    n = values.size
+    position = q / 100.0 * (n - 1)
+    low = int(position)
+    high = min(low + 1, n - 1)
+    part = np.partition(values, (low, high))
+    return float(part[low] + (position - low) * (part[high] - part[low]))
+
+
 class LoopStats:
     """Period and compute-time statistics over the last ``window`` cycles [s],
     and where the long periods came from.
@@ -145,7 +157,7 @@ class LoopStats:
                  **{f"over_2ms_{k}": v for k, v in self.over_2ms_causes.items()}}
         for name, ring in self.parts.items():
             m = min(self._parts_count[name], ring.size)
-            split[f"{name}_p99_ms"] = 1e3 * float(np.percentile(ring[:m], 99))
+            split[f"{name}_p99_ms"] = 1e3 * _percentile(ring[:m], 99)
             split[f"{name}_max_ms"] = 1e3 * self.parts_max[name]
         if n == 0:
             return {"rate_hz": 0.0, "period_p50_ms": 0.0, "period_p99_ms": 0.0,
@@ -154,13 +166,13 @@ class LoopStats:
                     "periods_over_5ms": 0, **split}
         periods = self.periods[:n]
         mean = float(np.mean(periods))
-        split["wake_late_p99_ms"] = 1e3 * float(np.percentile(self.late[:n], 99))
+        split["wake_late_p99_ms"] = 1e3 * _percentile(self.late[:n], 99)
         return {"rate_hz": 1.0 / mean if mean > 0 else 0.0,
-                "period_p50_ms": 1e3 * float(np.percentile(periods, 50)),
-                "period_p99_ms": 1e3 * float(np.percentile(periods, 99)),
+                "period_p50_ms": 1e3 * _percentile(periods, 50),
+                "period_p99_ms": 1e3 * _percentile(periods, 99),
                 "period_window_max_ms": 1e3 * float(periods.max()),
                 "period_max_ms": 1e3 * self.max_period,
-                "compute_p99_ms": 1e3 * float(np.percentile(self.compute[:n], 99)),
+                "compute_p99_ms": 1e3 * _percentile(self.compute[:n], 99),
                 "overruns": self.overruns, "periods_over_2ms": self.over_2ms,
                 "periods_over_5ms": self.over_5ms, **split}
 
