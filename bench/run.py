@@ -321,8 +321,8 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     over 2 ms a minute, woken late behind them; 50-52 ms preemptions are the kernel's
     real-time throttling (950 ms of real-time per second, `sched_rt_runtime_us`);
   * *the XR4000 in torque mode* is physics-bound: pybullet with the drive model steps in the
-    cycle, 0.45 ms of CPU median and 0.9 ms p99 under load of the 1 ms period (the control
-    cycle itself 0.02 ms), the loop process at 71-73 % of a core with SCHED_FIFO; a physics
+    cycle: the `controller` part p99 0.8-0.9 ms of the 1 ms period with SCHED_FIFO (the
+    control cycle itself 0.02 ms), the loop process at 71-73 % of a core with SCHED_FIFO; a physics
     process of its own would be the next step (docs/realtime.md);
   * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz from Python;
     on the loaded machine the node and the bench's own subscriber fell behind (fewer than
