@@ -334,7 +334,7 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     state["policy"] = current_policy() + ("" if not setup.in_process else " (thread)")
     # The start-up objects out of the collector's way, and no collection
     # triggered by allocation counts in the middle of a cycle: the loop
-    # collects once a second itself (status_gc in the cycle split). In a
+    # collects once a second itself (`gc` in the cycle split). In a
     # thread of the node's process (in_process) the collector is the node's.
     # The first status costs 10-25 ms (numpy's percentile and pickle set
     # themselves up on first use): pay it here, not in the cycle a second in.
