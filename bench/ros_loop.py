@@ -114,6 +114,30 @@ def _period_stats(times: np.ndarray) -> dict:
             "over_2ms": int(np.sum(periods > 2.0)), "over_5ms": int(np.sum(periods > 5.0))}
 
 
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time [s] process ``pid`` has used (all its threads)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _children(pid: int) -> list[int]:
+    """The child processes of ``pid`` (the node's loop process)."""
+    found = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        found += [int(c) for c in (task / "children").read_text().split()]
+    return found
+
+
+#: the loop's cycle split (LoopStats.summary) reported with each row
+_SPLIT_KEYS = ("wake_late_p99_ms", "wake_late_max_ms", "compute_p99_ms", "compute_max_ms",
+               "preempted_max_ms", "controller_p99_ms", "controller_max_ms",
+               "physics_p99_ms", "physics_max_ms", "state_write_p99_ms",
+               "state_write_max_ms", "status_p99_ms", "status_max_ms", "gc_p99_ms",
+               "gc_max_ms")
+_CAUSE_KEYS = ("over_2ms_woke_late", "over_2ms_compute", "over_2ms_preempted")
+
+
 def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
                   started=None, publish_rate: float = 50.0, outside: bool = False) -> dict:
     """The loop statistics of ``holonomic-bringup ARGS --enable`` at 1 kHz in
@@ -162,10 +186,17 @@ def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
             time.sleep(0.1)
         if not windows:
             raise RuntimeError("the robot did not publish diagnostics within 30 s")
+        # each window covers the last 2000 cycles (2 s at 1 kHz): measure from
+        # the third message on, so that no window holds the start-up
+        while len(windows) < 3 and time.monotonic() < deadline:
+            time.sleep(0.1)
         if started is not None:
             after = started(proc)
         windows.clear()
         overruns_before = int(latest["overruns"])
+        causes_before = {k: int(latest.get(k, 0)) for k in _CAUSE_KEYS}
+        loop_pids = _children(proc.pid)
+        cpu_before = [_cpu_seconds(p) for p in [proc.pid, *loop_pids]]
         over_before = (int(latest.get("periods_over_2ms", 0)),
                        int(latest.get("periods_over_5ms", 0)))
         odom_count[0] = 0
@@ -181,6 +212,7 @@ def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
             k += 1
             time.sleep(max(0.0, t0 + k / 100.0 - time.monotonic()))
         elapsed = time.monotonic() - t0
+        cpu_used = [_cpu_seconds(p) - c for p, c in zip([proc.pid, *loop_pids], cpu_before)]
         measuring[0] = False
         time.sleep(1.2)              # one more diagnostics message
     finally:
@@ -205,6 +237,13 @@ def _measure_loop(args: list[str], ns: str, name: str, seconds: float,
         "odom_hz": odom_count[0] / elapsed,
         "cmd_hz": k / elapsed,
         "scheduling": latest.get("scheduling", "thread"),
+        # CPU use over the measurement [% of one core]: the node (ROS, DDS,
+        # publishing) and its loop process
+        "node_cpu_percent": 100.0 * cpu_used[0] / elapsed,
+        "loop_cpu_percent": 100.0 * sum(cpu_used[1:]) / elapsed,
+        "split": {k: float(latest[k]) for k in _SPLIT_KEYS if k in latest},
+        "over_2ms_causes": {k: int(latest[k]) - causes_before[k]
+                            for k in _CAUSE_KEYS if k in latest},
     }
     if "periods_over_2ms" in latest:
         result["periods_over_2ms"] = int(latest["periods_over_2ms"]) - over_before[0]

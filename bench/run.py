@@ -204,6 +204,20 @@ def format_table(r: dict) -> str:
                    f"stamps p99 {st['p99_ms']:.3f} ms, max {st['max_ms']:.2f} ms, > 2 ms: "
                    f"{st['over_2ms']}, > 5 ms: {st['over_5ms']}; arrivals p99 "
                    f"{ar['p99_ms']:.3f} ms, max {ar['max_ms']:.2f} ms")
+        split = ""
+        if "split" in lp:
+            sp, causes = lp["split"], lp["over_2ms_causes"]
+            parts = ", ".join(f"{name} {sp[name + '_p99_ms']:.3f}/{sp[name + '_max_ms']:.2f}"
+                              for name in ("controller", "physics", "state_write", "status",
+                                           "gc") if name + "_p99_ms" in sp)
+            split = (f"; cycle split p99/max [ms]: woke late {sp['wake_late_p99_ms']:.3f}/"
+                     f"{sp['wake_late_max_ms']:.2f}, compute {sp['compute_p99_ms']:.3f}/"
+                     f"{sp['compute_max_ms']:.2f} (preempted in it up to "
+                     f"{sp['preempted_max_ms']:.2f}), {parts}; periods > 2 ms by cause: woke "
+                     f"late {causes['over_2ms_woke_late']}, preempted "
+                     f"{causes['over_2ms_preempted']}, compute {causes['over_2ms_compute']}; "
+                     f"CPU: node {lp['node_cpu_percent']:.0f} %, loop process "
+                     f"{lp['loop_cpu_percent']:.0f} % of a core")
         # the loop's own counts over the measurement decide "none later than";
         # the windows' max can reach up to 2 s before it (a window spans 2000 cycles)
         if "periods_over_2ms" in lp:
@@ -220,7 +234,7 @@ def format_table(r: dict) -> str:
             f"(median of {lp['windows']} 2-s windows; worst window "
             f"{lp['period_p99_ms_worst_window']:.3f} ms), max {lp['period_max_ms']:.2f} ms "
             f"(the windows'), "
-            f"{lp['overruns']} overruns{over}{out} | p99 ≤ {limit_p99} ms, none later than "
+            f"{lp['overruns']} overruns{over}{out}{split} | p99 ≤ {limit_p99} ms, none later than "
             f"{limit_max:g} ms | {verdict(lp['period_p99_ms_worst_window'] <= limit_p99)} (p99), "
             f"{verdict(none_later)} (max) |")
     la = r["latency"]
@@ -294,24 +308,26 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
 
 ## The targets not met, and what it would take
 
-- **1 kHz loop** (docs/realtime.md). The loop now runs in a process of its own (the driver,
-  the controller and the simulator; the ROS node is a shell), so it no longer shares the
-  interpreter lock with the executor. With SCHED_FIFO it holds 1 kHz on the mock driver
-  (p99 1.001 ms) even on the 2-core machine at load 10-16 from other work (these rows were
-  measured so, niced: indicative; the lead re-measures idle). What remains:
+- **1 kHz loop** (docs/realtime.md, "What limits the jitter"). The loop runs in a process of
+  its own (the driver, the controller and the simulator; the ROS node is a shell). Each row
+  gives the loop's own cycle split: nearly every period over 2 ms is the loop *not running*
+  (woken late, or preempted mid-cycle), not its work (HAMR cycle 0.12 ms p99). What remains:
   * *without real-time priority* the loop is an ordinary process among everything else on
-    two cores: at that load it got 73 % of its cycles (HAMR) and 18 % (XR4000 with 1 kHz
-    physics); on an idle machine it is the executor-free loop of the design, but no
-    guarantee;
-  * *with SCHED_FIFO* on a standard (not PREEMPT_RT) kernel, in a VM: a few periods over
-    2 ms a minute (the hypervisor and the kernel's non-preemptible sections, not our code:
-    the loop's compute p99 is tens of µs); the XR4000 in torque mode also steps 1 kHz
-    physics of four casters in the same cycle (0.4-0.6 ms), leaving little room: its p99
-    1.16 ms and 17 periods over 5 ms under that load;
-  * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz from Python,
-    ~0.2-0.3 ms a record; on the loaded machine the node (an ordinary process) fell behind
-    and the bench's own subscriber too (570-716 of 1000 joint_states a second received),
-    so the outside periods there measure the publishing path, not the loop.
+    two cores: under other helpers' load (these rows were measured so, niced: indicative)
+    it waits for a CPU; the node itself uses about a third of a core (three 1 kHz topics
+    from Python), the loop process 15-37 %;
+  * *with SCHED_FIFO* on a standard (not PREEMPT_RT) kernel, in a VM shared with other
+    real-time loops of the same priority (the other runs' loop processes): a few periods
+    over 2 ms a minute, woken late behind them; 50-52 ms preemptions are the kernel's
+    real-time throttling (950 ms of real-time per second, `sched_rt_runtime_us`);
+  * *the XR4000 in torque mode* is physics-bound: pybullet with the drive model steps in the
+    cycle: the `controller` part p99 0.8-0.9 ms of the 1 ms period with SCHED_FIFO (the
+    control cycle itself 0.02 ms), the loop process at 71-73 % of a core with SCHED_FIFO; a physics
+    process of its own would be the next step (docs/realtime.md);
+  * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz from Python;
+    on the loaded machine the node and the bench's own subscriber fell behind (fewer than
+    1000 joint_states a second received), so the outside periods there measure the
+    publishing path, not the loop.
 - **Simulation speed with the drive model ≥ 60 % of raw pybullet (HAMR).** The drive model
   makes the physics itself cheaper (joint torques and weak friction motors instead of
   pybullet's stiff velocity motors: raw stepping of the HAMR ran 1.6-2× as fast as with ideal
@@ -345,7 +361,10 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   process publishes `cmd_vel` at 100 Hz and subscribes `odom` and `joint_states`. The loop's
   own period statistics come from its diagnostics (the loop process's cycle timestamps; 1 Hz,
   each over the last 2000 cycles, overlapping and covering the measurement; periods over 2 ms
-  and 5 ms counted by the loop); start-up is not measured. From outside: the periods between
+  and 5 ms counted by the loop); the measurement starts at the third diagnostics message, so
+  no window holds the start-up. The cycle split (wake-up lateness, compute and the time
+  preempted in it, named parts, periods over 2 ms by cause) comes from the same diagnostics;
+  the CPU use of the node and its loop process from `/proc/<pid>/stat` over the measurement. From outside: the periods between
   consecutive `joint_states` stamps (the cycle's driver reading; for the mock on the monotonic
   clock, for the simulator simulated time, so only the mock's say anything) and between their
   arrivals here (DDS and this subscriber included). A received rate below 1000/s means the

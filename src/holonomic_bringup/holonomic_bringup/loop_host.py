@@ -28,18 +28,27 @@ drivers that cannot leave it (``loop.process: false``).
 
 from __future__ import annotations
 
+import gc
 import mmap
 import os
 import pickle
 import signal
 import socket
 import sys
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from holonomic_bringup import loop_wire as wire
 
+#: how long before each deadline the loop stops sleeping and busy-waits [s].
+#: Measured (bench/ros_loop.py, hamr at 1 kHz, SCHED_FIFO, timer slack 1 µs,
+#: 2-core VM): sleeping to the deadline wakes p99 54 µs late; 200 µs of
+#: spinning held p99 1.001 ms but burnt 20 % of a core at real-time priority
+#: (the core DDS and the node share, and real-time time the kernel throttles
+#: at 95 %); 60 µs covers the usual lateness for 6 %.
+LOOP_SPIN = 6e-5
 #: consecutive failed cycles after which the loop gives up (motors stay off)
 MAX_CONSECUTIVE_ERRORS = 50
 
@@ -189,10 +198,11 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     then stop and disarm the motors, close the drivers. Returns the exit code
     (0: stopped on request or by SIGTERM; 1: the loop gave up after repeated
     failures; 2: the robots could not be built)."""
-    from holonomic_core.loop import ControlLoop
-    from holonomic_core.realtime import current_policy, request_realtime
+    from holonomic_core.loop import ControlLoop, LoopStats
+    from holonomic_core.realtime import current_policy, request_realtime, tighten_timer_slack
 
     beat = np.frombuffer(heartbeat, dtype=np.int64, count=1)
+    clock = time.perf_counter
     built = _build(setup, sock)
     if built is None:
         return 2
@@ -255,7 +265,9 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     def robot_cycle(r: _Robot) -> None:
         r.cycle += 1
         r.drain_commands()
+        t = clock()
         r.controller.step()
+        add_part("controller", clock() - t)
         if r.pending:
             answer(r)
         if r.controller.reading is not None:
@@ -263,14 +275,26 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
             if r.clock_every and r.cycle % r.clock_every == 0:
                 flags |= wire.CLOCK
             if flags:
+                t = clock()
                 r.write_record(flags)
+                add_part("state_write", clock() - t)
         if r.cycle % r.diag_every == 0:
+            if r.index == 0 and not setup.in_process:
+                # the collector runs here, once a second, timed, instead of
+                # whenever an allocation count says so (it is disabled below)
+                t = clock()
+                gc.collect()
+                add_part("gc", clock() - t)
+            t = clock()
             status(r)
+            add_part("status", clock() - t)
 
     def cycle() -> None:
         poll_control()
         if world is not None:
+            t = clock()
             world.step(substeps)
+            add_part("physics", clock() - t)
         for r in robots:
             try:
                 robot_cycle(r)
@@ -293,17 +317,35 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
         state["give_up"] = True
         return False
 
-    loop = ControlLoop(1.0 / rate, cycle, on_error=on_error, name="control_loop")
+    loop = ControlLoop(1.0 / rate, cycle, on_error=on_error, name="control_loop",
+                       spin=LOOP_SPIN)
     state["loop"] = loop
+    add_part = loop.stats.add_part
     if stopping is not None:
         stopping.append(loop)
+    if not setup.in_process:
+        # sleeps end within 1 µs of the deadline instead of the default 50 µs
+        # (real-time threads get no slack anyway; normal ones do)
+        tighten_timer_slack()
     if not setup.in_process and first.values["loop.realtime"]:
         warning = request_realtime(int(first.values["loop.priority"]))
         if warning is not None:
             wire.send(sock, ("log", 0, "warn", warning))
     state["policy"] = current_policy() + ("" if not setup.in_process else " (thread)")
-    import gc
-    gc.freeze()       # the start-up objects out of the collector's way
+    # The start-up objects out of the collector's way, and no collection
+    # triggered by allocation counts in the middle of a cycle: the loop
+    # collects once a second itself (`gc` in the cycle split). In a
+    # thread of the node's process (in_process) the collector is the node's.
+    # The first status costs 10-25 ms (numpy's percentile and pickle set
+    # themselves up on first use): pay it here, not in the cycle a second in.
+    warm = LoopStats(window=2)
+    warm.add(0.0, 0.0)
+    warm.add_part("warm_up", 0.0)
+    for r in robots:
+        pickle.dumps((r.controller.status(), warm.summary()))
+    gc.freeze()
+    if not setup.in_process:
+        gc.disable()
     try:
         loop.run()
     finally:

@@ -58,50 +58,123 @@ class ManualClock:
         return self.now
 
 
+def _percentile(values: np.ndarray, q: float) -> float:
+    """numpy's default (linear) percentile ``q`` [%] of ``values``, by two
+    partitions: ~10 µs for 2000 values against ~50 µs for ``np.percentile``
+    (the loop computes ten of them once a second, inside a cycle)."""
+    n = values.size
+    position = q / 100.0 * (n - 1)
+    low = int(position)
+    high = min(low + 1, n - 1)
+    part = np.partition(values, (low, high))
+    return float(part[low] + (position - low) * (part[high] - part[low]))
+
+
 class LoopStats:
-    """Period and compute-time statistics over the last ``window`` cycles [s]."""
+    """Period and compute-time statistics over the last ``window`` cycles [s],
+    and where the long periods came from.
+
+    A period (start to start) is the previous cycle's compute plus the sleep
+    to the next deadline plus how late the loop woke after it. So each
+    period over 2 ms is put down to the largest of: the wake-up's lateness
+    (``woke_late``: the scheduler ran something else when the deadline came),
+    the previous cycle's CPU time (``compute``: the cycle itself was slow,
+    e.g. a garbage collection) and the rest of its wall time
+    (``preempted``: the cycle was taken off the CPU while it ran).
+    """
 
     def __init__(self, window: int = 2000):
         self.periods = np.zeros(window)
         self.compute = np.zeros(window)
+        self.late = np.zeros(window)
         self.count = 0
         self.overruns = 0
         self.max_period = 0.0
         #: periods since start longer than 2 ms and 5 ms (the 1 kHz targets' bounds)
         self.over_2ms = 0
         self.over_5ms = 0
+        #: the periods over 2 ms by cause (see the class docstring)
+        self.over_2ms_causes = {"woke_late": 0, "compute": 0, "preempted": 0}
+        self.max_late = 0.0
+        self.max_compute = 0.0
+        self.max_preempted = 0.0
+        self._previous = (0.0, 0.0)         # the last cycle's (compute, cpu) [s]
+        #: named parts of a cycle (e.g. physics, state writes): ring buffers and maxima [s]
+        self.parts: dict[str, np.ndarray] = {}
+        self.parts_max: dict[str, float] = {}
+        self._parts_count: dict[str, int] = {}
 
-    def add(self, period: float, compute: float) -> None:
+    def add(self, period: float, compute: float, late: float = 0.0,
+            cpu: float | None = None) -> None:
+        """One cycle: the period that ended at its start, its compute
+        (wall) time, how late it woke after its deadline and the CPU time its
+        compute took (None: the whole compute time) [s]."""
         i = self.count % self.periods.size
         self.periods[i] = period
         self.compute[i] = compute
+        self.late[i] = late
         self.count += 1
+        cpu = compute if cpu is None else min(cpu, compute)
+        preempted = compute - cpu
+        self.max_late = max(self.max_late, late)
+        self.max_compute = max(self.max_compute, compute)
+        self.max_preempted = max(self.max_preempted, preempted)
         if period > self.max_period:
             self.max_period = period
         if period > 2e-3:
             self.over_2ms += 1
             if period > 5e-3:
                 self.over_5ms += 1
+            before, before_cpu = self._previous
+            causes = {"woke_late": late, "compute": before_cpu,
+                      "preempted": before - before_cpu}
+            self.over_2ms_causes[max(causes, key=causes.get)] += 1
+        self._previous = (compute, cpu)
+
+    def add_part(self, name: str, seconds: float) -> None:
+        """The time [s] one named part of this cycle took."""
+        ring = self.parts.get(name)
+        if ring is None:
+            ring = self.parts[name] = np.zeros(self.periods.size)
+            self.parts_max[name] = 0.0
+            self._parts_count[name] = 0
+        n = self._parts_count[name]
+        ring[n % ring.size] = seconds
+        self._parts_count[name] = n + 1
+        if seconds > self.parts_max[name]:
+            self.parts_max[name] = seconds
 
     def summary(self) -> dict[str, float]:
         """rate [Hz], period p50/p99/max over the window and max since start
-        [ms], compute p99 [ms], overruns and periods over 2 ms / 5 ms since start."""
+        [ms], compute p99 [ms], overruns and periods over 2 ms / 5 ms since
+        start; the split: wake-up lateness p99 and max, compute max, time
+        preempted during a compute max [ms], the periods over 2 ms by cause,
+        and each named part's p99 over the window and max since start [ms]."""
         n = min(self.count, self.periods.size)
+        split = {"wake_late_p99_ms": 0.0, "wake_late_max_ms": 1e3 * self.max_late,
+                 "compute_max_ms": 1e3 * self.max_compute,
+                 "preempted_max_ms": 1e3 * self.max_preempted,
+                 **{f"over_2ms_{k}": v for k, v in self.over_2ms_causes.items()}}
+        for name, ring in self.parts.items():
+            m = min(self._parts_count[name], ring.size)
+            split[f"{name}_p99_ms"] = 1e3 * _percentile(ring[:m], 99)
+            split[f"{name}_max_ms"] = 1e3 * self.parts_max[name]
         if n == 0:
             return {"rate_hz": 0.0, "period_p50_ms": 0.0, "period_p99_ms": 0.0,
                     "period_window_max_ms": 0.0, "period_max_ms": 0.0,
                     "compute_p99_ms": 0.0, "overruns": 0, "periods_over_2ms": 0,
-                    "periods_over_5ms": 0}
+                    "periods_over_5ms": 0, **split}
         periods = self.periods[:n]
         mean = float(np.mean(periods))
+        split["wake_late_p99_ms"] = 1e3 * _percentile(self.late[:n], 99)
         return {"rate_hz": 1.0 / mean if mean > 0 else 0.0,
-                "period_p50_ms": 1e3 * float(np.percentile(periods, 50)),
-                "period_p99_ms": 1e3 * float(np.percentile(periods, 99)),
+                "period_p50_ms": 1e3 * _percentile(periods, 50),
+                "period_p99_ms": 1e3 * _percentile(periods, 99),
                 "period_window_max_ms": 1e3 * float(periods.max()),
                 "period_max_ms": 1e3 * self.max_period,
-                "compute_p99_ms": 1e3 * float(np.percentile(self.compute[:n], 99)),
+                "compute_p99_ms": 1e3 * _percentile(self.compute[:n], 99),
                 "overruns": self.overruns, "periods_over_2ms": self.over_2ms,
-                "periods_over_5ms": self.over_5ms}
+                "periods_over_5ms": self.over_5ms, **split}
 
 
 class ControlLoop:
@@ -147,10 +220,12 @@ class ControlLoop:
 
     def _run(self) -> None:
         clock = time.perf_counter
+        cpu_clock = time.thread_time      # this thread's CPU time: compute vs preempted
         deadline = clock()
         last: float | None = None
         while not self._stop.is_set():
             start = clock()
+            cpu_start = cpu_clock()
             try:
                 self._step()
             except Exception as exc:  # keep the loop alive; the owner decides
@@ -158,7 +233,8 @@ class ControlLoop:
                     break
             end = clock()
             if last is not None:
-                self.stats.add(start - last, end - start)
+                self.stats.add(start - last, end - start, max(0.0, start - deadline),
+                               cpu_clock() - cpu_start)
             last = start
             deadline += self.period
             if end - deadline > self.period:

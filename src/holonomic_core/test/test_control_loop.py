@@ -23,7 +23,10 @@ def test_loop_stats_summary_over_the_window_and_since_start():
     assert stats.summary() == {"rate_hz": 0.0, "period_p50_ms": 0.0, "period_p99_ms": 0.0,
                                "period_window_max_ms": 0.0, "period_max_ms": 0.0,
                                "compute_p99_ms": 0.0, "overruns": 0, "periods_over_2ms": 0,
-                               "periods_over_5ms": 0}
+                               "periods_over_5ms": 0, "wake_late_p99_ms": 0.0,
+                               "wake_late_max_ms": 0.0, "compute_max_ms": 0.0,
+                               "preempted_max_ms": 0.0, "over_2ms_woke_late": 0,
+                               "over_2ms_compute": 0, "over_2ms_preempted": 0}
     # six cycles in a window of four: the 9 ms period (second) leaves the
     # window but stays the maximum since start
     for period, compute in ((0.005, 0.001), (0.009, 0.002), (0.004, 0.001),
@@ -44,6 +47,31 @@ def test_loop_stats_summary_over_the_window_and_since_start():
     assert s["overruns"] == 2
     # since start: 5, 9, 4, 6, 5, 4 ms are all over 2 ms; 9 and 6 over 5 ms
     assert s["periods_over_2ms"] == 6 and s["periods_over_5ms"] == 2
+
+
+def test_each_long_period_is_put_down_to_its_largest_cause():
+    """By hand, 1 ms cycles (period = previous compute + sleep + lateness):
+    cycle 2 woke 2.5 ms late -> period 3.5 ms, cause woke_late; cycle 3
+    computed 2.4 ms of wall time of which 0.4 ms on the CPU (2 ms preempted)
+    -> cycle 4's period 3.4 ms, cause preempted; cycle 4 computed 3 ms on the
+    CPU (a collection) -> cycle 5's period 4 ms, cause compute. The maxima
+    and the named parts (p99 over the window by numpy's linear rule) too."""
+    stats = LoopStats(window=8)
+    stats.add(0.001, 0.0002, late=0.0, cpu=0.0002)          # cycle 1
+    stats.add(0.0035, 0.0002, late=0.0025, cpu=0.0002)      # cycle 2: woke late
+    stats.add(0.001, 0.0024, late=0.0, cpu=0.0004)          # cycle 3: preempted 2 ms
+    stats.add(0.0034, 0.003, late=0.0, cpu=0.003)           # cycle 4: slow compute
+    stats.add(0.004, 0.0002, late=0.0001)                   # cycle 5 (cpu: all of it)
+    for seconds in (0.0004, 0.0006):
+        stats.add_part("physics", seconds)
+    s = stats.summary()
+    assert (s["over_2ms_woke_late"], s["over_2ms_preempted"], s["over_2ms_compute"]) == (1, 1, 1)
+    assert s["periods_over_2ms"] == 3
+    assert s["wake_late_max_ms"] == pytest.approx(2.5)
+    assert s["compute_max_ms"] == pytest.approx(3.0)
+    assert s["preempted_max_ms"] == pytest.approx(2.0)
+    assert s["physics_max_ms"] == pytest.approx(0.6)
+    assert s["physics_p99_ms"] == pytest.approx(0.4 + 0.99 * 0.2)      # linear percentile
 
 
 def test_a_period_that_is_not_positive_is_refused():
