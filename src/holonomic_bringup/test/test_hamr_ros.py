@@ -87,7 +87,7 @@ def test_odometry_stays_within_0_2_percent_of_distance_over_20_s(hamr):
     # branch), and one fresh-clone CI run saw 0.0136: the test's cmd_vel
     # arrives on the wall clock while the simulation steps with the loop, so a
     # starved machine changes the drive itself. Bound: under 2x the loaded
-    # worst; a heading error of a kinematic or estimator bug is ~0.1 rad.
+    # worst (the distance bound above still catches a fraction of a percent).
     assert heading < 0.025, heading
 
 
