@@ -17,13 +17,18 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 
 from holonomic_core.calibration import CalibrationError, calibrate, samples_from_readings
 from holonomic_core.command_line import ArgumentParser
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
+from holonomic_core.loop import ManualClock
 from holonomic_core.model import load_model
 from holonomic_core.schema import ConfigError
+from holonomic_core.se2 import relative_pose
 from holonomic_sim.odometry_experiment import run_trial, simulate
 
 #: hidden faults per family: +-2 % radii, +-10 % caster offsets (PCV) or
@@ -76,6 +81,72 @@ def calibration_run(robot: str, sim_seed: int, duration: float = 60.0,
     errors = [result.theta[i] - truth[key] if fam.kinds[i] == "zero"
               else result.theta[i] / truth[key] - 1.0 for i, key in enumerate(fam.keys)]
     return result, truth, np.array(errors)
+
+
+@dataclass
+class ReferenceDrive:
+    """A measured-line-and-rotation drive: the readings, and what a user
+    with a tape measure reads off the floor (from the simulator's truth)."""
+
+    config: object
+    stamps: np.ndarray          # (N,) [s]
+    positions: np.ndarray       # (N x joints) [rad], as the controller saw them
+    hidden_truth: dict          # the simulator's hidden geometry (config keys)
+    forward: float              # end of the straight run along its start heading [m]
+    lateral: float              # ... to the left of that heading [m]
+    turns: float                # revolutions of the rotation [-] (unsigned)
+
+
+def reference_drive(robot: str, sim_seed: int, distance: float = 5.0, turns: float = 3.0,
+                    faults: dict | None = None, speed: float = 0.5,
+                    spin_rate: float = 1.0) -> ReferenceDrive:
+    """Offline (controller core + sim driver): rest 1 s, drive ``distance``
+    [m] forward at ``speed`` [m/s] (commanded, open loop), rest 1.5 s, spin
+    the drive about its axle ``turns`` revolutions at ``spin_rate`` [rad/s]
+    with the turret locked (twist (b w sin phi, b w cos phi, w): the axle
+    midpoint stays put), rest 1.5 s. A DDROT only. The measurements are
+    taken from the true poses at rest, as a user would."""
+    faults = FAULTS["ddrot"] if faults is None else faults
+    merged = {**faults, "sim.seed": sim_seed, "cmd_timeout": 0.0, "enable_on_start": True}
+    cfg = load_config(robot, merged)
+    if cfg.model.kind != "ddrot":
+        raise ConfigError("robot.kinematics", cfg.model.kind, "ddrot (a reference drive)")
+    b = cfg.model.kinematics.b
+    clock = ManualClock()
+    stamps, readings, truths = [], [], []
+    with cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate) as driver:
+        ctrl = BaseController(cfg, driver, clock=clock)
+        ctrl.request_enable(True)
+
+        def hold(seconds: float, command) -> None:
+            end = clock.now + seconds
+            while clock.now < end:
+                if callable(command):
+                    ctrl.set_command(command(ctrl.reading.positions))
+                else:
+                    ctrl.set_command(command)
+                ctrl.step()
+                clock.now = ctrl.reading.stamp
+                stamps.append(clock.now)
+                readings.append(ctrl.reading.positions.copy())
+                truths.append(driver.ground_truth().pose.copy())
+
+        still = (0.0, 0.0, 0.0)
+        hold(1.0, still)
+        at_start = len(truths) - 1
+        hold(distance / speed, (speed, 0.0, 0.0))
+        hold(1.5, still)
+        at_line_end = len(truths) - 1
+        hold(2 * math.pi * turns / spin_rate,
+             lambda q: (b * spin_rate * math.sin(q[2]), b * spin_rate * math.cos(q[2]),
+                        spin_rate))
+        hold(1.5, still)
+        hidden = dict(driver.hidden_truth)
+    truth = np.array(truths)
+    forward, lateral, _ = relative_pose(truth[at_start], truth[at_line_end])
+    turned = np.unwrap(truth[at_line_end:, 2])
+    return ReferenceDrive(cfg, np.array(stamps), np.array(readings), hidden, float(forward),
+                          float(lateral), abs(float(turned[-1] - turned[0])) / (2 * math.pi))
 
 
 def feedback_delay(config) -> float:
