@@ -15,6 +15,7 @@ motion) is one line on stderr and exit status 2.
 from __future__ import annotations
 
 import datetime
+import math
 import sys
 from pathlib import Path
 
@@ -97,6 +98,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--turns", type=float, metavar="N",
                         help="a DDROT: revolutions of the recording's rotation in place "
                              "(counted, the remainder measured; with --distance)")
+    parser.add_argument("--heading-deg", type=float, metavar="DEG",
+                        help="a DDROT: measured change of heading over the straight run "
+                             "(counter-clockwise positive); with it the turret zero is "
+                             "estimated too")
     parser.add_argument("--namespace", help="the robot's namespace in a fleet recording")
     parser.add_argument("--output", type=Path,
                         help="overlay to write (default: RECORDING with .calibration.yaml)")
@@ -117,6 +122,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f"--distance must be a measured distance > 0 m, got {args.distance:g}")
     if args.turns is not None and not args.turns > 0:
         return fail(f"--turns must be a counted number of turns > 0, got {args.turns:g}")
+    if args.heading_deg is not None and args.turns is None:
+        return fail("--heading-deg needs --distance and --turns (a DDROT's measured run)")
     if args.turns is not None and args.distance is None:
         return fail("--turns needs --distance: the straight run fixes the radii, the rotation "
                     "the separation")
@@ -135,8 +142,9 @@ def main(argv: list[str] | None = None) -> int:
                                        "place fixes the wheel separation")
             reference = "measured"
             segments = find_reference_segments(family_for(model), stamps, positions)
-            result = calibrate_measured(model, segments, args.distance, args.lateral,
-                                        args.turns)
+            result = calibrate_measured(
+                model, segments, args.distance, args.lateral, args.turns,
+                None if args.heading_deg is None else math.radians(args.heading_deg))
         else:
             if args.turns is not None:
                 raise CalibrationError(f"--turns is for a ddrot (a {model.kind} calibrates "

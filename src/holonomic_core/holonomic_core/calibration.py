@@ -427,8 +427,8 @@ _LINE_MIN_M, _LINE_MAX_TURN = 0.5, math.radians(60.0)
 #: a rotation: at least this much turn [rad], the turret axis moving less than this [m]
 _SPIN_MIN_TURN, _SPIN_MAX_CHORD = math.radians(90.0), 0.5
 #: assumed measurement errors (1 sigma) of the standard errors: a tape read
-#: to 5 mm, a rotation realigned to 0.5 deg
-TAPE_ERROR, TURN_ERROR = 0.005, math.radians(0.5)
+#: to 5 mm, a rotation realigned to 0.5 deg, a heading measured to 0.5 deg
+TAPE_ERROR, TURN_ERROR, HEADING_ERROR = 0.005, math.radians(0.5), math.radians(0.5)
 
 
 def motion_segments(stamps: Sequence[float], positions: np.ndarray) -> list[tuple[int, int]]:
@@ -501,25 +501,32 @@ def find_reference_segments(family, stamps, positions) -> MeasuredSegments:
 
 
 def calibrate_measured(model, segments: MeasuredSegments, distance: float, lateral: float,
-                       turns: float, iterations: int = 20) -> CalibrationResult:
+                       turns: float, heading: float | None = None,
+                       iterations: int = 20) -> CalibrationResult:
     """Fit the radii and the wheel separation (the family's "radius" and
     "length" parameters) to a measured straight run and rotation: the
     odometry's end point of the run in its start frame must be (``distance``
     forward, ``lateral`` to the left) [m], and the rotation must turn
     ``turns`` revolutions [-] (its direction from the recording). Three
-    measurements for three parameters; every "zero" parameter stays as
-    configured (stderr NaN: a turret zero error turns the run's direction,
-    which one end point cannot tell from a radius ratio). Standard errors
-    propagate TAPE_ERROR and TURN_ERROR."""
+    measurements for three parameters. A "zero" parameter (the turret zero)
+    turns the run's direction of travel, which one end point cannot tell from
+    a radius ratio (both move the end sideways): it is fitted only when the
+    run's change of ``heading`` [rad, counter-clockwise] was measured too,
+    else kept as configured (stderr NaN). Standard errors propagate
+    TAPE_ERROR, TURN_ERROR and HEADING_ERROR."""
     family = family_for(model)
     if not distance > 0:
         raise CalibrationError(f"--distance must be a measured distance > 0 m, got {distance:g}")
     if not turns > 0:
         raise CalibrationError(f"--turns must be a counted number of turns > 0, got {turns:g}")
-    free = np.array([k != "zero" for k in family.kinds])
+    free = np.array([k != "zero" or heading is not None for k in family.kinds])
     scale = _normaliser(family)
-    target = np.array([distance, lateral, segments.spin_sign * 2 * math.pi * turns])
-    sigma = np.array([TAPE_ERROR, TAPE_ERROR, TURN_ERROR])
+    target = [distance, lateral, segments.spin_sign * 2 * math.pi * turns]
+    sigma = [TAPE_ERROR, TAPE_ERROR, TURN_ERROR]
+    if heading is not None:
+        target.append(heading)
+        sigma.append(HEADING_ERROR)
+    target, sigma = np.array(target), np.array(sigma)
 
     def fun(z):
         z = np.asarray(z, float)
@@ -527,8 +534,11 @@ def calibrate_measured(model, segments: MeasuredSegments, distance: float, later
         full[..., free] = z
         theta = family.nominal + scale * full
         end = end_point(family, theta, segments.line)
-        turn = family.body(theta, segments.spin)[..., 2].sum(axis=-1)
-        return (np.concatenate((end, turn[..., None]), axis=-1) - target) / sigma
+        turns = [family.body(theta, segments.spin)[..., 2].sum(axis=-1)]
+        if heading is not None:
+            turns.append(family.body(theta, segments.line)[..., 2].sum(axis=-1))
+        return (np.concatenate([end] + [t[..., None] for t in turns], axis=-1)
+                - target) / sigma
 
     z = np.zeros(int(free.sum()))
     for _ in range(iterations):
@@ -555,7 +565,9 @@ def calibrate_measured(model, segments: MeasuredSegments, distance: float, later
     fixed = [family.labels[i] for i in np.flatnonzero(~free)]
     if fixed:
         result.notes.append(f"{', '.join(fixed)}: not observable from one line and one rotation, "
-                            "kept as configured")
-    result.notes.append(f"standard errors for a tape read to {TAPE_ERROR * 1e3:g} mm and a "
-                        f"rotation to {math.degrees(TURN_ERROR):g} deg")
+                            "kept as configured (measure the run's --heading-deg too)")
+    result.notes.append(f"standard errors for a tape read to {TAPE_ERROR * 1e3:g} mm, a "
+                        f"rotation to {math.degrees(TURN_ERROR):g} deg"
+                        + ("" if heading is None else
+                           f", a heading to {math.degrees(HEADING_ERROR):g} deg"))
     return result

@@ -95,6 +95,7 @@ class ReferenceDrive:
     forward: float              # end of the straight run along its start heading [m]
     lateral: float              # ... to the left of that heading [m]
     turns: float                # revolutions of the rotation [-] (unsigned)
+    heading: float              # heading change over the straight run [rad], ccw
 
 
 def reference_drive(robot: str, sim_seed: int, distance: float = 5.0, turns: float = 3.0,
@@ -143,10 +144,11 @@ def reference_drive(robot: str, sim_seed: int, distance: float = 5.0, turns: flo
         hold(1.5, still)
         hidden = dict(driver.hidden_truth)
     truth = np.array(truths)
-    forward, lateral, _ = relative_pose(truth[at_start], truth[at_line_end])
+    forward, lateral, heading = relative_pose(truth[at_start], truth[at_line_end])
     turned = np.unwrap(truth[at_line_end:, 2])
     return ReferenceDrive(cfg, np.array(stamps), np.array(readings), hidden, float(forward),
-                          float(lateral), abs(float(turned[-1] - turned[0])) / (2 * math.pi))
+                          float(lateral), abs(float(turned[-1] - turned[0])) / (2 * math.pi),
+                          float(heading))
 
 
 def feedback_delay(config) -> float:
