@@ -21,7 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from holonomic_core.calibration import CalibrationError, calibrate, samples_from_readings
+from holonomic_core.calibration import (CalibrationError, calibrate, calibrate_measured,
+                                        family_for, find_reference_segments,
+                                        samples_from_readings)
 from holonomic_core.command_line import ArgumentParser
 from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
@@ -198,6 +200,34 @@ def odometry_errors(robot: str, sim_seed: int, overlay: dict, seeds: int,
     return out
 
 
+def print_measured(robot: str, sim_seed: int, faults: dict) -> bool:
+    """Calibrate a DDROT from a measured line and rotation (reference_drive)
+    without and with the run's heading change; print the true-vs-estimated
+    tables. False when the calibration refused."""
+    run = reference_drive(robot, sim_seed, faults=faults)
+    fam = family_for(run.config.model)
+    truth = {k: run.hidden_truth.get(k, run.config.model.params[k]) for k in fam.keys}
+    print(f"\n{robot}: measured line and rotation (5 m forward, 3 turns about the axle, drive "
+          f"model), faults {faults}; the user measures forward {run.forward:.4f} m, lateral "
+          f"{run.lateral:.4f} m, heading {math.degrees(run.heading):+.3f} deg, "
+          f"{run.turns:.4f} turns")
+    try:
+        segments = find_reference_segments(fam, run.stamps, run.positions)
+        for heading in (None, run.heading):
+            result = calibrate_measured(run.config.model, segments, run.forward, run.lateral,
+                                        run.turns, heading)
+            print(f"  {'with' if heading is not None else 'without'} --heading-deg:")
+            print("\n".join("    " + line for line in result.table(truth).splitlines()))
+            for i, key in enumerate(fam.keys):
+                if fam.kinds[i] != "zero":
+                    print(f"    error {fam.labels[i]}: "
+                          f"{100 * (result.theta[i] / truth[key] - 1):+.3f} %")
+    except CalibrationError as exc:
+        print(f"{robot}: {exc}")
+        return False
+    return True
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(prog="holonomic-calibration-experiment",
                                      description=__doc__.split("\n")[0])
@@ -216,6 +246,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--faults", choices=("all", "tyres"), default="all",
                         help="all hidden faults, or the wheel radii only (the odometry "
                              "experiment's 'worn tyres' condition)")
+    parser.add_argument("--measured-only", action="store_true",
+                        help="a DDROT: only the measured line-and-rotation calibration "
+                             "(reference_drive), not the random drives")
     args = parser.parse_args(argv)
     failed = False
     for robot in args.robot or ["xr4000", "comr3", "hamr"]:
@@ -224,6 +257,12 @@ def main(argv: list[str] | None = None) -> int:
         except ConfigError as exc:
             print(f"holonomic-calibration-experiment: {exc}", file=sys.stderr)
             return 2
+        if kind == "ddrot":
+            failed |= not print_measured(robot, args.sim_seed,
+                                         FAULTS[kind] if args.faults == "all" else
+                                         {"sim.wheel_radius_spread": 0.02})
+        if args.measured_only:
+            continue
         faults = FAULTS[kind] if args.faults == "all" else {"sim.wheel_radius_spread": 0.02}
         references = ("ground_truth", "none") if kind == "pcv" else ("ground_truth",)
         overlay = None
