@@ -122,3 +122,22 @@ def test_holonomic_calibrate_takes_the_measurements_and_writes_the_overlay(
         assert values[key] == pytest.approx(run.hidden_truth[key], rel=0.001), key
     assert values["joints.turret_joint.zero_correction"] == pytest.approx(
         run.hidden_truth["joints.turret_joint.zero_correction"], abs=math.radians(0.01))
+
+
+def test_holonomic_calibrate_refuses_a_ddrot_run_without_its_rotation(
+        hamr_reference_drive, tmp_path, monkeypatch, capsys):
+    from holonomic_bringup import calibrate as program
+    run = hamr_reference_drive
+    recording = tmp_path / "run.mcap"
+    recording.write_bytes(b"")
+    # the line alone: the readings up to the pause after the straight run
+    # (the rotation starts after 1 s + 10 s + 1.5 s of the 0.005 s readings)
+    line_only = run.stamps < 12.0
+    monkeypatch.setattr(program, "read_recording", lambda *a: (
+        run.config.model, run.config.values, run.stamps[line_only], run.positions[line_only],
+        None))
+    for extra, message in ((["--turns", "3"], "no rotation found"),
+                           ([], "a ddrot needs --turns with --distance")):
+        assert program.main(["hamr", str(recording), "--distance", "4.7"] + extra) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
