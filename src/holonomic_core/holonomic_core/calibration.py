@@ -73,6 +73,16 @@ class Samples:
         return len(self.displacements)
 
 
+def _spaced(stamps: np.ndarray, period: float) -> np.ndarray:
+    """Indices of the readings kept when each is at least ``period`` [s]
+    after the previous kept one (the first is kept)."""
+    keep = [0]
+    for k in range(1, len(stamps)):
+        if stamps[k] - stamps[keep[-1]] >= period - 1e-9:
+            keep.append(k)
+    return np.array(keep)
+
+
 def samples_from_readings(stamps: Sequence[float], positions: np.ndarray,
                           truth: np.ndarray | None = None, period: float = 0.02) -> Samples:
     """Intervals between joint readings at least ``period`` [s] apart.
@@ -85,11 +95,7 @@ def samples_from_readings(stamps: Sequence[float], positions: np.ndarray,
     """
     stamps = np.asarray(stamps, float)
     q = np.asarray(positions, float)
-    keep = [0]
-    for k in range(1, len(stamps)):
-        if stamps[k] - stamps[keep[-1]] >= period - 1e-9:
-            keep.append(k)
-    idx = np.array(keep)
+    idx = _spaced(stamps, period)
     if len(idx) < 2:
         return Samples(np.zeros((0, q.shape[1])), np.zeros((0, q.shape[1])), np.zeros(0))
     q0 = q[idx[:-1]]
@@ -438,11 +444,7 @@ def motion_segments(stamps: Sequence[float], positions: np.ndarray) -> list[tupl
     (N x joints) [rad]."""
     t = np.asarray(stamps, float)
     q = np.asarray(positions, float)
-    keep = [0]
-    for k in range(1, len(t)):
-        if t[k] - t[keep[-1]] >= _STILL_WINDOW - 1e-9:
-            keep.append(k)
-    idx = np.array(keep)
+    idx = _spaced(t, _STILL_WINDOW)
     if len(idx) < 2:
         return []
     rate = np.abs(wrap_angles(np.diff(q[idx], axis=0))).max(axis=1) / np.diff(t[idx])
