@@ -546,16 +546,21 @@ def calibrate_measured(model, segments: MeasuredSegments, distance: float, later
     for _ in range(iterations):
         r = fun(z)
         J = jacobian(fun, z)
-        if np.linalg.cond(J) > 1e12:
+        if not np.all(np.isfinite(J)) or np.linalg.cond(J) > 1e12:
             raise CalibrationError("the straight run and the rotation do not determine the radii "
                                    "and the separation (is the rotation about the axle?)")
         step = np.linalg.solve(J, -r)
         z = z + step
         if np.max(np.abs(step)) < 1e-10:
             break
-    if np.max(np.abs(fun(z))) > 1e-3:
-        raise CalibrationError("no radii and separation reproduce the measurements: check "
-                               "--distance, --lateral and --turns against the recording")
+    miss = fun(z)
+    change = np.abs(z[[family.kinds[i] != "zero" for i in np.flatnonzero(free)]])
+    if not np.all(np.isfinite(miss)) or np.max(np.abs(miss)) > 1e-3 or np.max(change) > 0.1:
+        # as _scale_to_distance: a wheel is not 10 % off its drawing; a
+        # mistyped or mis-measured number is likelier
+        raise CalibrationError("the measurements need radii or a separation more than 10 % from "
+                               "the configured ones: check --distance, --lateral and --turns "
+                               "against the recording")
     J = jacobian(fun, z)
     cov = np.linalg.inv(J.T @ J)
     theta = family.nominal.copy()

@@ -200,7 +200,7 @@ def test_a_measured_drive_without_its_segments_is_refused(kwargs, cut, message):
         find_reference_segments(family_for(load_model("hamr")), stamps[:cut], raw[:cut])
 
 
-def test_measured_references_must_be_positive():
+def test_measured_references_must_be_positive_and_plausible():
     nominal = load_model("hamr")
     stamps, raw, _ = _measured_drive({"ddrot.half_wheel_separation": 0.1641})
     segments = find_reference_segments(family_for(nominal), stamps, raw)
@@ -208,6 +208,9 @@ def test_measured_references_must_be_positive():
         calibrate_measured(nominal, segments, -5.0, 0.0, 3.0)
     with pytest.raises(CalibrationError, match="--turns must be"):
         calibrate_measured(nominal, segments, 5.0, 0.0, 0.0)
+    # the run was 5.000 m: 50 (a slipped decimal point) needs 10x the radii
+    with pytest.raises(CalibrationError, match="more than 10 % from the configured"):
+        calibrate_measured(nominal, segments, 50.0, 0.0, 3.0)
 
 
 def test_straight_lines_only_are_rejected_with_what_motion_is_missing():
