@@ -31,7 +31,7 @@ from holonomic_core.loop import ManualClock
 from holonomic_core.model import load_model
 from holonomic_core.schema import ConfigError
 from holonomic_core.se2 import relative_pose
-from holonomic_sim.odometry_experiment import run_trial, simulate
+from holonomic_sim.odometry_experiment import final_errors, record_run, simulate
 
 #: hidden faults per family: +-2 % radii, +-10 % caster offsets (PCV) or
 #: +-2 % wheel separation (DDROT), +-3 deg steering / turret encoder zeros
@@ -192,8 +192,8 @@ def odometry_errors(robot: str, sim_seed: int, overlay: dict, seeds: int,
         for name, overrides, calibration in (("no faults", {}, None),
                                              ("faults, configured", fixed, None),
                                              ("faults, calibrated", fixed, overlay)):
-            trial = run_trial(robot, "nominal (mu 1.0)", seed, overrides=overrides,
-                              calibration=calibration)
+            trial = final_errors(record_run(robot, "nominal (mu 1.0)", seed,
+                                            overrides=overrides, calibration=calibration))
             out[name].append(trial.position_error["slip_min"])
             print(f"  {name:20s} path {seed}: {trial.position_error['slip_min'] * 1e3:6.1f} mm "
                   f"over {trial.distance:.1f} m", file=sys.stderr, flush=True)
@@ -246,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--faults", choices=("all", "tyres"), default="all",
                         help="all hidden faults, or the wheel radii only (the odometry "
                              "experiment's 'worn tyres' condition)")
+    parser.add_argument("--ground-truth-only", action="store_true",
+                        help="a PCV: skip the calibration without a reference")
     parser.add_argument("--measured-only", action="store_true",
                         help="a DDROT: only the measured line-and-rotation calibration "
                              "(reference_drive), not the random drives")
@@ -264,7 +266,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.measured_only:
             continue
         faults = FAULTS[kind] if args.faults == "all" else {"sim.wheel_radius_spread": 0.02}
-        references = ("ground_truth", "none") if kind == "pcv" else ("ground_truth",)
+        references = ("ground_truth", "none") if kind == "pcv" and not args.ground_truth_only \
+            else ("ground_truth",)
         overlay = None
         for reference in references:
             try:
