@@ -181,18 +181,23 @@ def truth_at_samples(run, delay: float) -> np.ndarray:
                             np.interp(at, t, yaw)])
 
 
+#: the odometry experiment's condition of the before/after runs: nominal
+#: floor on the simulator's default drive model (as the calibration drives)
+ODOMETRY_CONDITION = "drives, nominal (mu 1.0)"
+
+
 def odometry_errors(robot: str, sim_seed: int, overlay: dict, seeds: int,
-                    faults: dict) -> dict[str, list[float]]:
-    """Final slip_min position errors [m] per path seed: without faults,
-    with the faults and the configured parameters, with the faults and the
-    calibrated ones."""
+                    faults: dict, condition: str = ODOMETRY_CONDITION) -> dict[str, list[float]]:
+    """Final slip_min position errors [m] per path seed under the odometry
+    experiment's ``condition``: without faults, with the faults and the
+    configured parameters, with the faults and the calibrated ones."""
     out = {"no faults": [], "faults, configured": [], "faults, calibrated": []}
     fixed = {**faults, "sim.seed": sim_seed}
     for seed in range(seeds):
         for name, overrides, calibration in (("no faults", {}, None),
                                              ("faults, configured", fixed, None),
                                              ("faults, calibrated", fixed, overlay)):
-            trial = final_errors(record_run(robot, "nominal (mu 1.0)", seed,
+            trial = final_errors(record_run(robot, condition, seed,
                                             overrides=overrides, calibration=calibration))
             out[name].append(trial.position_error["slip_min"])
             print(f"  {name:20s} path {seed}: {trial.position_error['slip_min'] * 1e3:6.1f} mm "
