@@ -48,5 +48,12 @@ class TurretCalibration:
         return np.stack((v * c + self.b * wd * s, -v * s + self.b * wd * c, wd + d[:, 2]),
                         axis=-1)
 
+    def wheel_turn(self, theta: np.ndarray, samples: Samples) -> np.ndarray:
+        """The drive's own turn [rad] per sample (... x N), from the wheels
+        alone: what an in-place rotation about the axle measures."""
+        theta = np.asarray(theta, float)[..., None, :]
+        d = samples.displacements
+        return 0.5 * (theta[..., 1] * d[:, 1] - theta[..., 0] * d[:, 0]) / theta[..., 2]
+
     def overlay(self, theta: np.ndarray) -> dict[str, float]:
         return {k: float(v) for k, v in zip(self.keys, theta)}

@@ -15,6 +15,7 @@ motion) is one line on stderr and exit status 2.
 from __future__ import annotations
 
 import datetime
+import math
 import sys
 from pathlib import Path
 
@@ -88,14 +89,27 @@ def main(argv: list[str] | None = None) -> int:
                         help="ground_truth: the simulator's true motion fixes the scale "
                              "(a DDROT needs it)")
     parser.add_argument("--distance", type=float, metavar="METRES",
-                        help="measured straight-line distance from where the recording "
-                             "starts to where it ends: fixes the scale of the radii")
+                        help="a PCV: measured straight-line distance from where the recording "
+                             "starts to where it ends (fixes the scale of the radii); a DDROT: "
+                             "how far the straight run ended along its start heading")
+    parser.add_argument("--lateral", type=float, default=0.0, metavar="METRES",
+                        help="a DDROT: how far the straight run ended to the left (negative: "
+                             "right) of its start heading (default 0)")
+    parser.add_argument("--turns", type=float, metavar="N",
+                        help="a DDROT: revolutions of the recording's rotation in place "
+                             "(counted, the remainder measured; with --distance)")
+    parser.add_argument("--heading-deg", type=float, metavar="DEG",
+                        help="a DDROT: measured change of heading over the straight run "
+                             "(counter-clockwise positive); with it the turret zero is "
+                             "estimated too")
     parser.add_argument("--namespace", help="the robot's namespace in a fleet recording")
     parser.add_argument("--output", type=Path,
                         help="overlay to write (default: RECORDING with .calibration.yaml)")
     args = parser.parse_args(argv)
 
-    from holonomic_core.calibration import CalibrationError, calibrate, samples_from_readings
+    from holonomic_core.calibration import (CalibrationError, calibrate, calibrate_measured,
+                                            family_for, find_reference_segments,
+                                            samples_from_readings)
     from holonomic_core.schema import ConfigError
 
     def fail(message: str) -> int:
@@ -106,6 +120,13 @@ def main(argv: list[str] | None = None) -> int:
         return fail("give either --reference ground_truth or --distance, not both")
     if args.distance is not None and not args.distance > 0:
         return fail(f"--distance must be a measured distance > 0 m, got {args.distance:g}")
+    if args.turns is not None and not args.turns > 0:
+        return fail(f"--turns must be a counted number of turns > 0, got {args.turns:g}")
+    if args.heading_deg is not None and args.turns is None:
+        return fail("--heading-deg needs --distance and --turns (a DDROT's measured run)")
+    if args.turns is not None and args.distance is None:
+        return fail("--turns needs --distance: the straight run fixes the radii, the rotation "
+                    "the separation")
     if not args.recording.is_file():
         return fail(f"no such file: {args.recording}")
     try:
@@ -114,14 +135,30 @@ def main(argv: list[str] | None = None) -> int:
         if args.reference == "ground_truth" and truth is None:
             raise CalibrationError("--reference ground_truth needs ground_truth/odom in the "
                                    "recording (simulator runs publish it)")
-        samples = samples_from_readings(stamps, positions,
-                                        truth if args.reference == "ground_truth" else None)
-        reference = "distance" if args.distance is not None else args.reference
-        result = calibrate(model, samples, reference, args.distance)
+        measured = model.kind == "ddrot" and args.distance is not None
+        if measured:
+            if args.turns is None:
+                raise CalibrationError("a ddrot needs --turns with --distance: the rotation in "
+                                       "place fixes the wheel separation")
+            reference = "measured"
+            segments = find_reference_segments(family_for(model), stamps, positions)
+            result = calibrate_measured(
+                model, segments, args.distance, args.lateral, args.turns,
+                None if args.heading_deg is None else math.radians(args.heading_deg))
+        else:
+            if args.turns is not None:
+                raise CalibrationError(f"--turns is for a ddrot (a {model.kind} calibrates "
+                                       "from its own redundancy plus --distance)")
+            samples = samples_from_readings(stamps, positions,
+                                            truth if args.reference == "ground_truth" else None)
+            reference = "distance" if args.distance is not None else args.reference
+            result = calibrate(model, samples, reference, args.distance)
     except (ValueError, ConfigError) as exc:   # CalibrationError is a ValueError
         return fail(str(exc))
+    fit = "" if reference == "measured" else \
+        f", rms residual {result.rms_residual * 1e6:.1f} um"
     print(f"{model.name} ({model.kind}) from {args.recording}: {result.samples} samples, "
-          f"reference {reference}, rms residual {result.rms_residual * 1e6:.1f} um")
+          f"reference {reference}{fit}")
     print(result.table())
     if model.kind == "pcv" and recorded.get("control_mode", "velocity") == "velocity":
         result.notes.append("recorded in velocity mode: the wheel and steering loops impose the "

@@ -125,6 +125,12 @@ CALIBRATE = [
     (["hamr", "/nonexistent/run.mcap"], "no such file"),
     (["hamr", "{junk_mcap}"], "as an MCAP recording"),
     (["hamr", "{junk_mcap}", "--distance", "-1"], "--distance"),
+    (["hamr", "{junk_mcap}", "--distance", "5", "--turns", "-3"], "--turns must be a counted"),
+    (["hamr", "{junk_mcap}", "--turns", "3"], "--turns needs --distance"),
+    (["hamr", "{junk_mcap}", "--heading-deg", "2"], "--heading-deg needs --distance and --turns"),
+    (["hamr", "{junk_mcap}", "--distance", "5", "--turns", "3", "--reference", "ground_truth"],
+     "not both"),
+    (["hamr", "{junk_mcap}", "--distance", "5", "--turns", "three"], "invalid float value"),
 ]
 
 ODOMETRY_CALIBRATE = [

@@ -16,7 +16,8 @@ every radius and caster offset together scales every sensed contact velocity
 alike); it comes from the simulator's ground truth (a body-displacement
 residual per sample) or a measured distance, or -- without either -- the mean
 radius stays as configured. The DDROT has no redundancy: it is calibrated against the
-reference alone.
+reference alone -- the ground truth, or (:func:`calibrate_measured`) one
+straight run whose end point and one rotation whose turns a user measured.
 
 The solver is Levenberg-Marquardt on parameters normalised by their
 configured values (radii and offsets relative, zeros in radians), with a
@@ -72,6 +73,16 @@ class Samples:
         return len(self.displacements)
 
 
+def _spaced(stamps: np.ndarray, period: float) -> np.ndarray:
+    """Indices of the readings kept when each is at least ``period`` [s]
+    after the previous kept one (the first is kept)."""
+    keep = [0]
+    for k in range(1, len(stamps)):
+        if stamps[k] - stamps[keep[-1]] >= period - 1e-9:
+            keep.append(k)
+    return np.array(keep)
+
+
 def samples_from_readings(stamps: Sequence[float], positions: np.ndarray,
                           truth: np.ndarray | None = None, period: float = 0.02) -> Samples:
     """Intervals between joint readings at least ``period`` [s] apart.
@@ -84,11 +95,7 @@ def samples_from_readings(stamps: Sequence[float], positions: np.ndarray,
     """
     stamps = np.asarray(stamps, float)
     q = np.asarray(positions, float)
-    keep = [0]
-    for k in range(1, len(stamps)):
-        if stamps[k] - stamps[keep[-1]] >= period - 1e-9:
-            keep.append(k)
-    idx = np.array(keep)
+    idx = _spaced(stamps, period)
     if len(idx) < 2:
         return Samples(np.zeros((0, q.shape[1])), np.zeros((0, q.shape[1])), np.zeros(0))
     q0 = q[idx[:-1]]
@@ -177,8 +184,8 @@ class CalibrationResult:
             nom, est, se = fam.nominal[i], self.theta[i], self.stderr[i]
             change = (f"{math.degrees(est - nom):+6.2f} deg" if zero
                       else f"{100 * (est / nom - 1):+6.2f} %")
-            line = (f"{label:34s} {k * nom:8.3f} -> {k * est:8.3f} +- {k * se:.3f} {unit} "
-                    f"({change})")
+            spread = "not observed" if math.isnan(se) else f"+- {k * se:.3f} {unit}"
+            line = f"{label:34s} {k * nom:8.3f} -> {k * est:8.3f} {spread} ({change})"
             if truth is not None:
                 true = truth.get(fam.keys[i], nom)
                 line += f"  truth {k * true:8.3f} {unit}"
@@ -259,7 +266,8 @@ def calibrate(model, samples: Samples, reference: str = "none",
     if not family.self_consistent and not use_ref:
         raise CalibrationError(
             f"a {model.kind} has no redundant joint, so driving alone cannot show a wrong "
-            "parameter: calibrate against --reference ground_truth")
+            "parameter: calibrate against --reference ground_truth, or a measured straight "
+            "run and rotation (--distance, --turns; docs/calibration.md)")
     radius = np.array([k == "radius" for k in family.kinds])
     gauge = None if use_ref else float(family.nominal[radius].mean())
     if reference == "distance":
@@ -410,3 +418,163 @@ def missing_motion(family, samples: Samples) -> str:
     if m["direction_spread"] < 0.2:
         return "one direction of travel only: drive sideways and diagonally too"
     return "drive longer, with more changes of direction and rotation"
+
+
+# -- a measured straight line and a measured rotation (a base without redundancy) --
+
+#: joint rate [rad/s] below which a joint counts as still, judged over
+#: STILL_WINDOW [s] (longer than an encoder count's flicker)
+_STILL_RATE, _STILL_WINDOW = 0.05, 0.1
+#: a pause of at least this long [s] separates two segments of motion
+SEGMENT_PAUSE = 0.5
+#: a straight run: at least this far [m] and turning less than this [rad]
+#: (by the configured model: a 3 % radius mismatch bends 5 m by ~30 deg)
+_LINE_MIN_M, _LINE_MAX_TURN = 0.5, math.radians(60.0)
+#: a rotation: at least this much turn [rad], the turret axis moving less than this [m]
+_SPIN_MIN_TURN, _SPIN_MAX_CHORD = math.radians(90.0), 0.5
+#: assumed measurement errors (1 sigma) of the standard errors: a tape read
+#: to 5 mm, a rotation realigned to 0.5 deg, a heading measured to 0.5 deg
+TAPE_ERROR, TURN_ERROR, HEADING_ERROR = 0.005, math.radians(0.5), math.radians(0.5)
+
+
+def motion_segments(stamps: Sequence[float], positions: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) reading indices of each stretch of joint motion,
+    separated by pauses of at least SEGMENT_PAUSE [s] in which every joint
+    turned slower than _STILL_RATE [rad/s]; ``stamps`` [s], ``positions``
+    (N x joints) [rad]."""
+    t = np.asarray(stamps, float)
+    q = np.asarray(positions, float)
+    idx = _spaced(t, _STILL_WINDOW)
+    if len(idx) < 2:
+        return []
+    rate = np.abs(wrap_angles(np.diff(q[idx], axis=0))).max(axis=1) / np.diff(t[idx])
+    segments: list[list[int]] = []
+    for k in np.flatnonzero(rate > _STILL_RATE):
+        start, end = int(idx[k]), int(idx[k + 1])
+        if segments and t[start] - t[segments[-1][1]] < SEGMENT_PAUSE:
+            segments[-1][1] = end
+        else:
+            segments.append([start, end])
+    return [(a, b) for a, b in segments if t[b] - t[a] >= SEGMENT_PAUSE]
+
+
+@dataclass(frozen=True)
+class MeasuredSegments:
+    """The straight run and the rotation of a reference drive, as samples."""
+
+    line: Samples
+    spin: Samples
+    spin_sign: float        # +1 counter-clockwise, -1 clockwise (configured odometry)
+
+
+def find_reference_segments(family, stamps, positions) -> MeasuredSegments:
+    """Split a recording into motion segments (pauses of SEGMENT_PAUSE) and
+    pick the one straight run and the one rotation, judged by the configured
+    odometry: a straight run moves the base at least 0.5 m and turns it less
+    than 60 deg; a rotation turns it at least 90 deg while the base_link
+    origin ends within 0.5 m of where it started, with the wheels (not only
+    a turret) turning it. Raises CalibrationError naming what is missing."""
+    lines, spins = [], []
+    for first, last in motion_segments(stamps, positions):
+        seg = samples_from_readings(stamps[first:last + 1], positions[first:last + 1])
+        if len(seg) < 2:
+            continue
+        chord_m = float(np.linalg.norm(end_point(family, family.nominal, seg)))
+        turn = float(family.body(family.nominal, seg)[:, 2].sum())
+        if chord_m >= _LINE_MIN_M and abs(turn) < _LINE_MAX_TURN:
+            lines.append(seg)
+        elif abs(turn) >= _SPIN_MIN_TURN and chord_m < _SPIN_MAX_CHORD:
+            wheels = float(family.wheel_turn(family.nominal, seg).sum())
+            if abs(wheels) < 0.5 * abs(turn):
+                raise CalibrationError(
+                    "the rotation turned the turret, not the wheels: spin the drive about its "
+                    "axle (docs/calibration.md, 'measured line and rotation')")
+            spins.append((seg, math.copysign(1.0, turn)))
+    if not lines:
+        raise CalibrationError("no straight run found (at least 0.5 m turning less than 60 deg, "
+                               "with a pause of 0.5 s before and after)")
+    if not spins:
+        raise CalibrationError("no rotation found (at least a quarter turn in place, with a "
+                               "pause of 0.5 s before and after)")
+    if len(lines) > 1 or len(spins) > 1:
+        raise CalibrationError(f"found {len(lines)} straight runs and {len(spins)} rotations: "
+                               "record exactly one of each, so the measurements belong to them")
+    return MeasuredSegments(lines[0], spins[0][0], spins[0][1])
+
+
+def calibrate_measured(model, segments: MeasuredSegments, distance: float, lateral: float,
+                       turns: float, heading: float | None = None,
+                       iterations: int = 20) -> CalibrationResult:
+    """Fit the radii and the wheel separation (the family's "radius" and
+    "length" parameters) to a measured straight run and rotation: the
+    odometry's end point of the run in its start frame must be (``distance``
+    forward, ``lateral`` to the left) [m], and the rotation must turn
+    ``turns`` revolutions [-] (its direction from the recording). Three
+    measurements for three parameters. A "zero" parameter (the turret zero)
+    turns the run's direction of travel, which one end point cannot tell from
+    a radius ratio (both move the end sideways): it is fitted only when the
+    run's change of ``heading`` [rad, counter-clockwise] was measured too,
+    else kept as configured (stderr NaN). Standard errors propagate
+    TAPE_ERROR, TURN_ERROR and HEADING_ERROR."""
+    family = family_for(model)
+    if not distance > 0:
+        raise CalibrationError(f"--distance must be a measured distance > 0 m, got {distance:g}")
+    if not turns > 0:
+        raise CalibrationError(f"--turns must be a counted number of turns > 0, got {turns:g}")
+    free = np.array([k != "zero" or heading is not None for k in family.kinds])
+    scale = _normaliser(family)
+    target = [distance, lateral, segments.spin_sign * 2 * math.pi * turns]
+    sigma = [TAPE_ERROR, TAPE_ERROR, TURN_ERROR]
+    if heading is not None:
+        target.append(heading)
+        sigma.append(HEADING_ERROR)
+    target, sigma = np.array(target), np.array(sigma)
+
+    def fun(z):
+        z = np.asarray(z, float)
+        full = np.zeros(z.shape[:-1] + (len(free),))
+        full[..., free] = z
+        theta = family.nominal + scale * full
+        end = end_point(family, theta, segments.line)
+        turns = [family.body(theta, segments.spin)[..., 2].sum(axis=-1)]
+        if heading is not None:
+            turns.append(family.body(theta, segments.line)[..., 2].sum(axis=-1))
+        return (np.concatenate([end] + [t[..., None] for t in turns], axis=-1)
+                - target) / sigma
+
+    z = np.zeros(int(free.sum()))
+    for _ in range(iterations):
+        r = fun(z)
+        J = jacobian(fun, z)
+        if not np.all(np.isfinite(J)) or np.linalg.cond(J) > 1e12:
+            raise CalibrationError("the straight run and the rotation do not determine the radii "
+                                   "and the separation (is the rotation about the axle?)")
+        step = np.linalg.solve(J, -r)
+        z = z + step
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    miss = fun(z)
+    change = np.abs(z[[family.kinds[i] != "zero" for i in np.flatnonzero(free)]])
+    if not np.all(np.isfinite(miss)) or np.max(np.abs(miss)) > 1e-3 or np.max(change) > 0.1:
+        # as _scale_to_distance: a wheel is not 10 % off its drawing; a
+        # mistyped or mis-measured number is likelier
+        raise CalibrationError("the measurements need radii or a separation more than 10 % from "
+                               "the configured ones: check --distance, --lateral and --turns "
+                               "against the recording")
+    J = jacobian(fun, z)
+    cov = np.linalg.inv(J.T @ J)
+    theta = family.nominal.copy()
+    theta[free] += scale[free] * z
+    stderr = np.full(len(theta), np.nan)
+    stderr[free] = scale[free] * np.sqrt(np.diag(cov))
+    result = CalibrationResult(family, theta, stderr, 0.0,
+                               len(segments.line) + len(segments.spin), "measured")
+    fixed = [family.labels[i] for i in np.flatnonzero(~free)]
+    if fixed:
+        result.notes.append(f"{', '.join(fixed)}: not observable from one line and one rotation, "
+                            "kept as configured (measure the run's --heading-deg too)")
+    result.notes.append(f"standard errors for a tape read to {TAPE_ERROR * 1e3:g} mm, a "
+                        f"rotation to {math.degrees(TURN_ERROR):g} deg"
+                        + ("" if heading is None else
+                           f", a heading to {math.degrees(HEADING_ERROR):g} deg"))
+    return result

@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from holonomic_core.calibration import (CalibrationError, calibrate, family_for,
+from holonomic_core.calibration import (CalibrationError, calibrate, calibrate_measured,
+                                        family_for, find_reference_segments,
                                         samples_from_readings)
 from holonomic_core.config import load_model, read_params_file
 from holonomic_core.drift_watch import DriftWatch
@@ -131,6 +132,85 @@ def test_ddrot_is_calibrated_against_the_reference():
                                                                        abs=math.radians(0.01))
     with pytest.raises(CalibrationError, match="no redundant joint.*ground_truth"):
         calibrate(nominal, samples_from_readings(stamps, raw), "none")
+
+
+def _reference_twists(b, dt=0.005, spin=1.0, turns=3.0, line=(0.5, 10.0), turret_only=False):
+    """1 s still, ``line`` = (speed [m/s], time [s]) forward, 1 s still,
+    ``turns`` revolutions at ``spin`` [rad/s] about the axle with the turret
+    at 0 (twist (0, b w, w): the axle midpoint, b behind base_link, stays
+    put), 1 s still; ``turret_only``: the base turns about base_link instead
+    (only the turret moves)."""
+    still = [np.zeros(3)] * int(1.0 / dt)
+    rotate = (0.0, 0.0, spin) if turret_only else (0.0, b * spin, spin)
+    return (still + [np.array((line[0], 0.0, 0.0))] * int(line[1] / dt) + still
+            + [np.array(rotate)] * int(2 * math.pi * turns / spin / dt) + still)
+
+
+def _measured_drive(truth, zero=0.0, **kwargs):
+    """(model, readings' stamps, raw readings, segment ends, true poses) of
+    a reference drive of hamr with the geometry ``truth`` and a turret
+    encoder reading ``zero`` [rad] too much."""
+    true_model = load_model("hamr", truth)
+    twists = _reference_twists(true_model.kinematics.b, **kwargs)
+    stamps, raw, poses = _drive(true_model, twists, zeros=np.array([0.0, 0.0, zero]))
+    return stamps, raw, poses
+
+
+def test_ddrot_is_calibrated_from_a_measured_line_and_rotation():
+    # slip-free readings of a hamr whose wheels and separation differ from
+    # the config; a user measures the straight run's end point and heading
+    # change in its start frame and counts the rotation's turns: the fit
+    # must give back the geometry that made the readings
+    nominal = load_model("hamr")
+    truth = {"ddrot.left_wheel_radius": 0.0615 * 0.985, "ddrot.right_wheel_radius": 0.0615 * 1.01,
+             "ddrot.half_wheel_separation": 0.1641 * 1.02}
+    stamps, raw, poses = _measured_drive(truth, zero=math.radians(2.0))
+    line_end = int(12.0 / 0.005)                  # 1 s still + 10 s run + 1 s still
+    forward, lateral = poses[line_end, :2]       # the run starts at the origin, heading 0
+    # the true body follows the twists exactly: 5 m straight, 3 turns
+    assert (forward, lateral) == pytest.approx((5.0, 0.0), abs=1e-9)
+    yaw = np.unwrap(poses[:, 2])
+    assert yaw[-1] - yaw[line_end] == pytest.approx(6 * math.pi, abs=0.01)
+    segments = find_reference_segments(family_for(nominal), stamps, raw)
+    result = calibrate_measured(nominal, segments, forward, lateral,
+                                (yaw[-1] - yaw[line_end]) / (2 * math.pi), heading=0.0)
+    est = result.overlay()
+    # exact up to rounding: a straight line and a spin at constant rates are
+    # integrated exactly by the midpoint readings and the chords (measured:
+    # 4e-14 relative, 7e-12 deg)
+    for key, value in truth.items():
+        assert est[key] == pytest.approx(value, rel=1e-10), key
+    assert est["joints.turret_joint.zero_correction"] == pytest.approx(-math.radians(2.0),
+                                                                       abs=1e-10)
+    # without the heading the turret zero is not fitted: kept, and said so
+    plain = calibrate_measured(nominal, segments, forward, lateral, 3.0)
+    assert plain.overlay()["joints.turret_joint.zero_correction"] == 0.0
+    assert math.isnan(plain.stderr[3]) and "not observable" in " ".join(plain.notes)
+
+
+@pytest.mark.parametrize("kwargs, cut, message", [
+    ({}, int(12.0 / 0.005), "no rotation found"),                  # the line alone
+    ({"line": (0.5, 0.0)}, None, "no straight run found"),         # the rotation alone
+    ({"turret_only": True}, None, "turned the turret, not the wheels"),
+])
+def test_a_measured_drive_without_its_segments_is_refused(kwargs, cut, message):
+    truth = {"ddrot.half_wheel_separation": 0.1641}
+    stamps, raw, _ = _measured_drive(truth, **kwargs)
+    with pytest.raises(CalibrationError, match=message):
+        find_reference_segments(family_for(load_model("hamr")), stamps[:cut], raw[:cut])
+
+
+def test_measured_references_must_be_positive_and_plausible():
+    nominal = load_model("hamr")
+    stamps, raw, _ = _measured_drive({"ddrot.half_wheel_separation": 0.1641})
+    segments = find_reference_segments(family_for(nominal), stamps, raw)
+    with pytest.raises(CalibrationError, match="--distance must be a measured distance > 0"):
+        calibrate_measured(nominal, segments, -5.0, 0.0, 3.0)
+    with pytest.raises(CalibrationError, match="--turns must be"):
+        calibrate_measured(nominal, segments, 5.0, 0.0, 0.0)
+    # the run was 5.000 m: 50 (a slipped decimal point) needs 10x the radii
+    with pytest.raises(CalibrationError, match="more than 10 % from the configured"):
+        calibrate_measured(nominal, segments, 50.0, 0.0, 3.0)
 
 
 def test_straight_lines_only_are_rejected_with_what_motion_is_missing():

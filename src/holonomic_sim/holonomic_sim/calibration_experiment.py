@@ -17,14 +17,21 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 
-from holonomic_core.calibration import CalibrationError, calibrate, samples_from_readings
+from holonomic_core.calibration import (CalibrationError, calibrate, calibrate_measured,
+                                        family_for, find_reference_segments,
+                                        samples_from_readings)
 from holonomic_core.command_line import ArgumentParser
+from holonomic_core.config import load_config
+from holonomic_core.controller import BaseController
+from holonomic_core.loop import ManualClock
 from holonomic_core.model import load_model
 from holonomic_core.schema import ConfigError
-from holonomic_sim.odometry_experiment import run_trial, simulate
+from holonomic_core.se2 import relative_pose
+from holonomic_sim.odometry_experiment import final_errors, record_run, simulate
 
 #: hidden faults per family: +-2 % radii, +-10 % caster offsets (PCV) or
 #: +-2 % wheel separation (DDROT), +-3 deg steering / turret encoder zeros
@@ -78,6 +85,74 @@ def calibration_run(robot: str, sim_seed: int, duration: float = 60.0,
     return result, truth, np.array(errors)
 
 
+@dataclass
+class ReferenceDrive:
+    """A measured-line-and-rotation drive: the readings, and what a user
+    with a tape measure reads off the floor (from the simulator's truth)."""
+
+    config: object
+    stamps: np.ndarray          # (N,) [s]
+    positions: np.ndarray       # (N x joints) [rad], as the controller saw them
+    hidden_truth: dict          # the simulator's hidden geometry (config keys)
+    forward: float              # end of the straight run along its start heading [m]
+    lateral: float              # ... to the left of that heading [m]
+    turns: float                # revolutions of the rotation [-] (unsigned)
+    heading: float              # heading change over the straight run [rad], ccw
+
+
+def reference_drive(robot: str, sim_seed: int, distance: float = 5.0, turns: float = 3.0,
+                    faults: dict | None = None, speed: float = 0.5,
+                    spin_rate: float = 1.0) -> ReferenceDrive:
+    """Offline (controller core + sim driver): rest 1 s, drive ``distance``
+    [m] forward at ``speed`` [m/s] (commanded, open loop), rest 1.5 s, spin
+    the drive about its axle ``turns`` revolutions at ``spin_rate`` [rad/s]
+    with the turret locked (twist (b w sin phi, b w cos phi, w): the axle
+    midpoint stays put), rest 1.5 s. A DDROT only. The measurements are
+    taken from the true poses at rest, as a user would."""
+    faults = FAULTS["ddrot"] if faults is None else faults
+    merged = {**faults, "sim.seed": sim_seed, "cmd_timeout": 0.0, "enable_on_start": True}
+    cfg = load_config(robot, merged)
+    if cfg.model.kind != "ddrot":
+        raise ConfigError("robot.kinematics", cfg.model.kind, "ddrot (a reference drive)")
+    b = cfg.model.kinematics.b
+    clock = ManualClock()
+    stamps, readings, truths = [], [], []
+    with cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate) as driver:
+        ctrl = BaseController(cfg, driver, clock=clock)
+        ctrl.request_enable(True)
+
+        def hold(seconds: float, command) -> None:
+            end = clock.now + seconds
+            while clock.now < end:
+                if callable(command):
+                    ctrl.set_command(command(ctrl.reading.positions))
+                else:
+                    ctrl.set_command(command)
+                ctrl.step()
+                clock.now = ctrl.reading.stamp
+                stamps.append(clock.now)
+                readings.append(ctrl.reading.positions.copy())
+                truths.append(driver.ground_truth().pose.copy())
+
+        still = (0.0, 0.0, 0.0)
+        hold(1.0, still)
+        at_start = len(truths) - 1
+        hold(distance / speed, (speed, 0.0, 0.0))
+        hold(1.5, still)
+        at_line_end = len(truths) - 1
+        hold(2 * math.pi * turns / spin_rate,
+             lambda q: (b * spin_rate * math.sin(q[2]), b * spin_rate * math.cos(q[2]),
+                        spin_rate))
+        hold(1.5, still)
+        hidden = dict(driver.hidden_truth)
+    truth = np.array(truths)
+    forward, lateral, heading = relative_pose(truth[at_start], truth[at_line_end])
+    turned = np.unwrap(truth[at_line_end:, 2])
+    return ReferenceDrive(cfg, np.array(stamps), np.array(readings), hidden, float(forward),
+                          float(lateral), abs(float(turned[-1] - turned[0])) / (2 * math.pi),
+                          float(heading))
+
+
 def feedback_delay(config) -> float:
     """How old [s] the simulator's joint readings are: the drive model's
     ``sim.drive.feedback_delay`` rounded to physics steps (as the drives
@@ -106,23 +181,56 @@ def truth_at_samples(run, delay: float) -> np.ndarray:
                             np.interp(at, t, yaw)])
 
 
+#: the odometry experiment's condition of the before/after runs: nominal
+#: floor on the simulator's default drive model (as the calibration drives)
+ODOMETRY_CONDITION = "drives, nominal (mu 1.0)"
+
+
 def odometry_errors(robot: str, sim_seed: int, overlay: dict, seeds: int,
-                    faults: dict) -> dict[str, list[float]]:
-    """Final slip_min position errors [m] per path seed: without faults,
-    with the faults and the configured parameters, with the faults and the
-    calibrated ones."""
+                    faults: dict, condition: str = ODOMETRY_CONDITION) -> dict[str, list[float]]:
+    """Final slip_min position errors [m] per path seed under the odometry
+    experiment's ``condition``: without faults, with the faults and the
+    configured parameters, with the faults and the calibrated ones."""
     out = {"no faults": [], "faults, configured": [], "faults, calibrated": []}
     fixed = {**faults, "sim.seed": sim_seed}
     for seed in range(seeds):
         for name, overrides, calibration in (("no faults", {}, None),
                                              ("faults, configured", fixed, None),
                                              ("faults, calibrated", fixed, overlay)):
-            trial = run_trial(robot, "nominal (mu 1.0)", seed, overrides=overrides,
-                              calibration=calibration)
+            trial = final_errors(record_run(robot, condition, seed,
+                                            overrides=overrides, calibration=calibration))
             out[name].append(trial.position_error["slip_min"])
             print(f"  {name:20s} path {seed}: {trial.position_error['slip_min'] * 1e3:6.1f} mm "
                   f"over {trial.distance:.1f} m", file=sys.stderr, flush=True)
     return out
+
+
+def print_measured(robot: str, sim_seed: int, faults: dict) -> bool:
+    """Calibrate a DDROT from a measured line and rotation (reference_drive)
+    without and with the run's heading change; print the true-vs-estimated
+    tables. False when the calibration refused."""
+    run = reference_drive(robot, sim_seed, faults=faults)
+    fam = family_for(run.config.model)
+    truth = {k: run.hidden_truth.get(k, run.config.model.params[k]) for k in fam.keys}
+    print(f"\n{robot}: measured line and rotation (5 m forward, 3 turns about the axle, drive "
+          f"model), faults {faults}; the user measures forward {run.forward:.4f} m, lateral "
+          f"{run.lateral:.4f} m, heading {math.degrees(run.heading):+.3f} deg, "
+          f"{run.turns:.4f} turns")
+    try:
+        segments = find_reference_segments(fam, run.stamps, run.positions)
+        for heading in (None, run.heading):
+            result = calibrate_measured(run.config.model, segments, run.forward, run.lateral,
+                                        run.turns, heading)
+            print(f"  {'with' if heading is not None else 'without'} --heading-deg:")
+            print("\n".join("    " + line for line in result.table(truth).splitlines()))
+            for i, key in enumerate(fam.keys):
+                if fam.kinds[i] != "zero":
+                    print(f"    error {fam.labels[i]}: "
+                          f"{100 * (result.theta[i] / truth[key] - 1):+.3f} %")
+    except CalibrationError as exc:
+        print(f"{robot}: {exc}")
+        return False
+    return True
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -143,6 +251,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--faults", choices=("all", "tyres"), default="all",
                         help="all hidden faults, or the wheel radii only (the odometry "
                              "experiment's 'worn tyres' condition)")
+    parser.add_argument("--ground-truth-only", action="store_true",
+                        help="a PCV: skip the calibration without a reference")
+    parser.add_argument("--measured-only", action="store_true",
+                        help="a DDROT: only the measured line-and-rotation calibration "
+                             "(reference_drive), not the random drives")
     args = parser.parse_args(argv)
     failed = False
     for robot in args.robot or ["xr4000", "comr3", "hamr"]:
@@ -151,8 +264,15 @@ def main(argv: list[str] | None = None) -> int:
         except ConfigError as exc:
             print(f"holonomic-calibration-experiment: {exc}", file=sys.stderr)
             return 2
+        if kind == "ddrot":
+            failed |= not print_measured(robot, args.sim_seed,
+                                         FAULTS[kind] if args.faults == "all" else
+                                         {"sim.wheel_radius_spread": 0.02})
+        if args.measured_only:
+            continue
         faults = FAULTS[kind] if args.faults == "all" else {"sim.wheel_radius_spread": 0.02}
-        references = ("ground_truth", "none") if kind == "pcv" else ("ground_truth",)
+        references = ("ground_truth", "none") if kind == "pcv" and not args.ground_truth_only \
+            else ("ground_truth",)
         overlay = None
         for reference in references:
             try:

@@ -64,3 +64,80 @@ def test_the_reference_is_taken_where_the_delayed_readings_were_sampled():
     assert aligned[:, 1] == pytest.approx([0.0, -1.0, -3.0])
     assert aligned[:, 2] == pytest.approx([3.1, 3.1 + step / 2, 3.1 + step + 0.05])
     assert truth_at_samples(run, 0.0) is run.truth
+
+
+@pytest.fixture(scope="module")
+def hamr_reference_drive():
+    # hidden: radii +-2 %, separation +-2 %, turret zero +-3 deg (sim.seed 2);
+    # the simulator's default drive model; 5 m forward, 3 turns about the axle
+    from holonomic_sim.calibration_experiment import reference_drive
+    return reference_drive("hamr", 2)
+
+
+def test_ddrot_geometry_is_recovered_from_a_measured_line_and_rotation(hamr_reference_drive):
+    # told only what a user measures on the floor (the straight run's end
+    # point and heading change in its start frame, the turns counted), the
+    # fit must meet the 0.3 % for the radii and the separation
+    from holonomic_core.calibration import (calibrate_measured, family_for,
+                                            find_reference_segments)
+    run = hamr_reference_drive
+    model = run.config.model
+    fam = family_for(model)
+    truth = {k: run.hidden_truth[k] for k in fam.keys}
+    assert truth["ddrot.left_wheel_radius"] != truth["ddrot.right_wheel_radius"]  # perturbed
+    segments = find_reference_segments(fam, run.stamps, run.positions)
+    result = calibrate_measured(model, segments, run.forward, run.lateral, run.turns,
+                                run.heading)
+    errors = np.array([result.theta[i] - truth[k] if fam.kinds[i] == "zero"
+                       else result.theta[i] / truth[k] - 1.0 for i, k in enumerate(fam.keys)])
+    # measured: radii 0.011 % / 0.005 %, half separation 0.026 %, turret zero 0.0012 deg
+    assert _worst(result, errors, "radius") < 0.001
+    assert _worst(result, errors, "length") < 0.001
+    assert _worst(result, errors, "zero") < math.radians(0.01)
+
+
+def test_holonomic_calibrate_takes_the_measurements_and_writes_the_overlay(
+        hamr_reference_drive, tmp_path, monkeypatch, capsys):
+    # the program's path from a recording to the overlay (the recording
+    # reader replaced by the reference drive's readings)
+    from holonomic_bringup import calibrate as program
+    from holonomic_core.config import read_params_file
+    run = hamr_reference_drive
+    monkeypatch.setattr(program, "read_recording", lambda *a: (
+        run.config.model, run.config.values, run.stamps, run.positions, None))
+    recording = tmp_path / "run.mcap"
+    recording.write_bytes(b"")
+    out = tmp_path / "overlay.yaml"
+    assert program.main(["hamr", str(recording), "--distance", f"{run.forward:.4f}",
+                         "--lateral", f"{run.lateral:.4f}", "--turns", f"{run.turns:.4f}",
+                         "--heading-deg", f"{math.degrees(run.heading):.3f}",
+                         "--output", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "reference measured" in printed and "turret zero" in printed
+    values = read_params_file(out)
+    for key in ("ddrot.left_wheel_radius", "ddrot.right_wheel_radius",
+                "ddrot.half_wheel_separation"):
+        # the measurements rounded as a user types them (0.1 mm, 1e-4 turn,
+        # 0.001 deg): the same 0.026 % worst as the previous test
+        assert values[key] == pytest.approx(run.hidden_truth[key], rel=0.001), key
+    assert values["joints.turret_joint.zero_correction"] == pytest.approx(
+        run.hidden_truth["joints.turret_joint.zero_correction"], abs=math.radians(0.01))
+
+
+def test_holonomic_calibrate_refuses_a_ddrot_run_without_its_rotation(
+        hamr_reference_drive, tmp_path, monkeypatch, capsys):
+    from holonomic_bringup import calibrate as program
+    run = hamr_reference_drive
+    recording = tmp_path / "run.mcap"
+    recording.write_bytes(b"")
+    # the line alone: the readings up to the pause after the straight run
+    # (the rotation starts after 1 s + 10 s + 1.5 s of the 0.005 s readings)
+    line_only = run.stamps < 12.0
+    monkeypatch.setattr(program, "read_recording", lambda *a: (
+        run.config.model, run.config.values, run.stamps[line_only], run.positions[line_only],
+        None))
+    for extra, message in ((["--turns", "3"], "no rotation found"),
+                           ([], "a ddrot needs --turns with --distance")):
+        assert program.main(["hamr", str(recording), "--distance", "4.7"] + extra) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
