@@ -313,9 +313,10 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   gives the loop's own cycle split: nearly every period over 2 ms is the loop *not running*
   (woken late, or preempted mid-cycle), not its work (HAMR cycle 0.12 ms p99). What remains:
   * *without real-time priority* the loop is an ordinary process among everything else on
-    two cores: under other helpers' load (these rows were measured so, niced: indicative)
-    it waits for a CPU; the node itself uses about a third of a core (three 1 kHz topics
-    from Python), the loop process 15-37 %;
+    two cores: it waits for a CPU behind the node (about a third of a core: three 1 kHz
+    topics from Python), DDS and the bench's own processes, even on an otherwise idle machine
+    (a p99 of about 1.6 ms, a few periods over 5 ms a minute); nothing but real-time priority
+    (or a core of its own) removes that;
   * *with SCHED_FIFO* on a standard (not PREEMPT_RT) kernel, in a VM shared with other
     real-time loops of the same priority (the other runs' loop processes): a few periods
     over 2 ms a minute, woken late behind them; 50-52 ms preemptions are the kernel's
@@ -325,17 +326,9 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     control cycle itself 0.02 ms), the loop process at 71-73 % of a core with SCHED_FIFO; a physics
     process of its own would be the next step (docs/realtime.md);
   * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz from Python;
-    on the loaded machine the node and the bench's own subscriber fell behind (fewer than
-    1000 joint_states a second received), so the outside periods there measure the
+    on a loaded machine the node and the bench's own subscriber fall behind (fewer than
+    1000 joint_states a second received), and the outside periods then measure the
     publishing path, not the loop.
-- **Simulation speed with the drive model ≥ 60 % of raw pybullet (HAMR).** The drive model
-  makes the physics itself cheaper (joint torques and weak friction motors instead of
-  pybullet's stiff velocity motors: raw stepping of the HAMR ran 1.6-2× as fast as with ideal
-  motors in our runs), so the simulator with the drive model runs *faster* than with ideal motors;
-  but its fixed Python cost per physics step (one joint-state read, the velocity loops, one
-  `TORQUE_CONTROL` call) and the controller's weigh more against that cheaper step. The
-  XR4000, whose physics costs more per step, meets it. Meeting it for the HAMR needs both the
-  per-step drive loop and the control cycle cheaper (compiled), not more Python tuning.
 """
     text += f"""
 
