@@ -199,7 +199,7 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     (0: stopped on request or by SIGTERM; 1: the loop gave up after repeated
     failures; 2: the robots could not be built)."""
     from holonomic_core.loop import ControlLoop, LoopStats
-    from holonomic_core.realtime import current_policy, request_realtime, tighten_timer_slack
+    from holonomic_core.realtime import current_policy, schedule_loop, tighten_timer_slack
 
     beat = np.frombuffer(heartbeat, dtype=np.int64, count=1)
     clock = time.perf_counter
@@ -327,9 +327,10 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
         # sleeps end within 1 µs of the deadline instead of the default 50 µs
         # (real-time threads get no slack anyway; normal ones do)
         tighten_timer_slack()
-    if not setup.in_process and first.values["loop.realtime"]:
-        warning = request_realtime(int(first.values["loop.priority"]))
-        if warning is not None:
+    if not setup.in_process:
+        for warning in schedule_loop(bool(first.values["loop.realtime"]),
+                                     int(first.values["loop.priority"]),
+                                     float(first.values["loop.slice"])):
             wire.send(sock, ("log", 0, "warn", warning))
     state["policy"] = current_policy() + ("" if not setup.in_process else " (thread)")
     # The start-up objects out of the collector's way, and no collection

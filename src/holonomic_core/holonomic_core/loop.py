@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from holonomic_core.realtime import DEFAULT_PRIORITY
+from holonomic_core.realtime import DEFAULT_PRIORITY, DEFAULT_SLICE, SLICE_MAX
 from holonomic_core.schema import ParamSpec
 
 #: where and how the base controller runs its loop (docs/realtime.md)
@@ -30,11 +30,20 @@ LOOP_SPECS: list[ParamSpec] = [
               "process (for a driver that cannot leave it, e.g. python-can's in-process "
               "virtual bus).", default=True),
     ParamSpec("loop.realtime", "bool",
-              "The loop process requests SCHED_FIFO at loop.priority and locks its memory "
-              "(mlockall); when the system does not permit it, one warning and the loop "
-              "runs without (docs/realtime.md says how to grant it).", default=True),
+              "The loop process requests real-time priority: SCHED_FIFO at loop.priority "
+              "and its memory locked (mlockall), which need privilege; when the system "
+              "does not permit it, one warning and the loop runs on the normal scheduler "
+              "with loop.slice (docs/realtime.md says how to grant it). false: it does "
+              "not ask, and runs on the normal scheduler with loop.slice.", default=True),
     ParamSpec("loop.priority", "int", "SCHED_FIFO priority of the loop process (1-98).",
               default=DEFAULT_PRIORITY, minimum=1, maximum=98),
+    ParamSpec("loop.slice", "double",
+              "On the normal scheduler (no SCHED_FIFO), the time slice the loop process "
+              "asks for (Linux 6.12+, no privilege needed; the kernel clamps to 0.1-100 "
+              "ms): a short slice lets its wake-ups preempt the node and DDS instead of "
+              "waiting behind them, at the same CPU share [s]. 0: the kernel's default "
+              "slice. On an older kernel one warning, and the loop runs on.",
+              default=DEFAULT_SLICE, minimum=0.0, maximum=SLICE_MAX),
     ParamSpec("loop.watchdog_timeout", "double",
               "A loop process whose cycles stop for this long is hung: the node kills it "
               "(the drives' own watchdogs stop the motors; the simulation stops with it) "

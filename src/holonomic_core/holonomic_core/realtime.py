@@ -11,13 +11,21 @@ line for the caller to log, and the loop runs on without it.
 Granting it on a robot (docs/realtime.md): ``rtprio`` and ``memlock`` limits
 for the user in ``/etc/security/limits.conf`` (or CAP_SYS_NICE and
 CAP_IPC_LOCK), ideally a PREEMPT_RT kernel.
+
+Without that privilege, :func:`request_slice` asks the normal scheduler
+(EEVDF, Linux 6.12 and later) for a short time slice: no privilege is
+needed, the loop's share of the CPU stays what it was, but its wake-ups come
+with an earlier virtual deadline and so preempt the tasks running on the
+kernel's default slice (the node, DDS) instead of waiting behind them.
 """
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import functools
 import os
+import platform
 
 #: mlockall flags (linux/mman.h): what is mapped now and everything mapped later
 MCL_CURRENT, MCL_FUTURE = 1, 2
@@ -25,6 +33,13 @@ MCL_CURRENT, MCL_FUTURE = 1, 2
 #: below the kernel's interrupt threads (50 on PREEMPT_RT) would be 49; 50 is
 #: what robot integrators expect to see in ``chrt -p``
 DEFAULT_PRIORITY = 50
+
+
+@functools.lru_cache(maxsize=1)
+def _libc():
+    """The C library (loaded once: find_library may run ldconfig), or None."""
+    name = ctypes.util.find_library("c")
+    return None if name is None else ctypes.CDLL(name, use_errno=True)
 
 
 def set_fifo(priority: int) -> str | None:
@@ -41,10 +56,9 @@ def set_fifo(priority: int) -> str | None:
 def lock_memory() -> str | None:
     """``mlockall(MCL_CURRENT | MCL_FUTURE)``. Returns None when granted,
     else why not (one line)."""
-    libc_name = ctypes.util.find_library("c")
-    if libc_name is None:
+    libc = _libc()
+    if libc is None:
         return "mlockall unavailable (no C library found)"
-    libc = ctypes.CDLL(libc_name, use_errno=True)
     if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
         errno = ctypes.get_errno()
         return f"mlockall not permitted ({os.strerror(errno)})"
@@ -57,11 +71,83 @@ def tighten_timer_slack(nanoseconds: int = 1000) -> bool:
     which the kernel uses to batch wake-ups of normal threads). Needs no
     privilege. Returns whether it was set."""
     pr_set_timerslack = 29                      # linux/prctl.h
-    libc_name = ctypes.util.find_library("c")
-    if libc_name is None:
+    libc = _libc()
+    if libc is None:
         return False
-    libc = ctypes.CDLL(libc_name, use_errno=True)
     return libc.prctl(pr_set_timerslack, ctypes.c_ulong(nanoseconds), 0, 0, 0) == 0
+
+
+#: sched_setattr / sched_getattr system call numbers (glibc has no wrapper):
+#: x86_64 arch/x86/entry/syscalls/syscall_64.tbl 314/315; arm64 and the other
+#: architectures of include/uapi/asm-generic/unistd.h 274/275
+_SCHED_ATTR_SYSCALLS = {"x86_64": (314, 315), "aarch64": (274, 275), "arm64": (274, 275)}
+#: the slice the kernel accepts (kernel/sched/syscalls.c clamps to 0.1-100 ms) [s]
+SLICE_MIN, SLICE_MAX = 1e-4, 0.1
+#: the loop's slice on the normal scheduler [s]: the shortest the kernel
+#: grants; a HAMR cycle computes 0.1-0.2 ms (docs/realtime.md)
+DEFAULT_SLICE = SLICE_MIN
+
+
+class _SchedAttr(ctypes.Structure):
+    """``struct sched_attr`` (include/uapi/linux/sched/types.h), 56 bytes."""
+
+    _fields_ = [("size", ctypes.c_uint32), ("sched_policy", ctypes.c_uint32),
+                ("sched_flags", ctypes.c_uint64), ("sched_nice", ctypes.c_int32),
+                ("sched_priority", ctypes.c_uint32), ("sched_runtime", ctypes.c_uint64),
+                ("sched_deadline", ctypes.c_uint64), ("sched_period", ctypes.c_uint64),
+                ("sched_util_min", ctypes.c_uint32), ("sched_util_max", ctypes.c_uint32)]
+
+
+def _get_attr(libc, getattr_nr: int) -> _SchedAttr | None:
+    attr = _SchedAttr()
+    if libc.syscall(getattr_nr, 0, ctypes.byref(attr), ctypes.sizeof(attr), 0) != 0:
+        return None
+    return attr
+
+
+def current_slice() -> float | None:
+    """The calling thread's time slice on the normal scheduler [s] (what
+    ``sched_getattr`` reports as ``sched_runtime``: Linux 6.12 and later),
+    or None (another policy, an older kernel, an unknown architecture)."""
+    numbers = _SCHED_ATTR_SYSCALLS.get(platform.machine())
+    libc = _libc()
+    if numbers is None or libc is None or os.sched_getscheduler(0) not in (
+            os.SCHED_OTHER, os.SCHED_BATCH):
+        return None
+    attr = _get_attr(libc, numbers[1])
+    return None if attr is None or attr.sched_runtime == 0 else attr.sched_runtime * 1e-9
+
+
+def request_slice(seconds: float) -> str | None:
+    """Ask the normal scheduler for a time slice of ``seconds`` (0.1-100 ms;
+    the kernel clamps) for the calling thread: ``sched_setattr`` with
+    ``sched_runtime`` on its current policy (SCHED_OTHER or SCHED_BATCH) and
+    its current nice value, which needs no privilege. Returns None when the
+    kernel took it, else why not (one line): a kernel before 6.12 accepts the
+    call but keeps its own slice (read back through ``sched_getattr``)."""
+    numbers = _SCHED_ATTR_SYSCALLS.get(platform.machine())
+    if numbers is None:
+        return f"no sched_setattr system call number known for {platform.machine()}"
+    libc = _libc()
+    if libc is None:
+        return "sched_setattr unavailable (no C library found)"
+    policy = os.sched_getscheduler(0)
+    if policy not in (os.SCHED_OTHER, os.SCHED_BATCH):
+        return "a time slice applies to the normal scheduler only"
+    # the thread's own nice value: sched_setattr sets it too, and lowering
+    # it (e.g. under `nice -n 10`) would need privilege
+    nice = os.getpriority(os.PRIO_PROCESS, 0)
+    nanoseconds = int(round(seconds * 1e9))
+    attr = _SchedAttr(size=ctypes.sizeof(_SchedAttr), sched_policy=policy,
+                      sched_nice=nice, sched_runtime=nanoseconds)
+    if libc.syscall(numbers[0], 0, ctypes.byref(attr), 0) != 0:
+        return f"sched_setattr refused ({os.strerror(ctypes.get_errno())})"
+    got = current_slice()
+    wanted = min(max(nanoseconds, int(SLICE_MIN * 1e9)), int(SLICE_MAX * 1e9)) * 1e-9
+    if got is None or abs(got - wanted) > 1e-9:
+        return (f"this kernel ({platform.release()}) keeps its own time slice (a slice "
+                "per task needs Linux 6.12 or later)")
+    return None
 
 
 def request_realtime(priority: int = DEFAULT_PRIORITY) -> str | None:
@@ -76,8 +162,32 @@ def request_realtime(priority: int = DEFAULT_PRIORITY) -> str | None:
 
 
 def current_policy() -> str:
-    """The calling process's scheduling policy and priority, e.g. 'SCHED_FIFO 50'."""
+    """The calling thread's scheduling policy and priority, and on the normal
+    scheduler its time slice where the kernel reports one, e.g.
+    'SCHED_FIFO 50' or 'SCHED_OTHER 0, slice 0.10 ms'."""
     names = {os.SCHED_OTHER: "SCHED_OTHER", os.SCHED_FIFO: "SCHED_FIFO",
-             os.SCHED_RR: "SCHED_RR"}
+             os.SCHED_RR: "SCHED_RR", os.SCHED_BATCH: "SCHED_BATCH"}
     policy = os.sched_getscheduler(0)
-    return f"{names.get(policy, str(policy))} {os.sched_getparam(0).sched_priority}"
+    text = f"{names.get(policy, str(policy))} {os.sched_getparam(0).sched_priority}"
+    slice_s = current_slice()
+    return text if slice_s is None else f"{text}, slice {slice_s * 1e3:.2f} ms"
+
+
+def schedule_loop(realtime: bool, priority: int, slice_s: float) -> list[str]:
+    """Schedule the calling thread (the control loop's) as the ``loop.*``
+    parameters say: with ``realtime``, SCHED_FIFO at ``priority`` and
+    mlockall (:func:`request_realtime`); then, if it is on the normal
+    scheduler (``realtime`` false, or SCHED_FIFO refused) and ``slice_s`` >
+    0, a time slice of ``slice_s`` [s] (:func:`request_slice`). Returns the
+    warning lines to log, one per refusal (none: all granted)."""
+    warnings = []
+    if realtime:
+        refused = request_realtime(priority)
+        if refused is not None:
+            warnings.append(refused)
+    if slice_s > 0.0 and os.sched_getscheduler(0) == os.SCHED_OTHER:
+        why = request_slice(slice_s)
+        if why is not None:
+            warnings.append(f"loop.slice {slice_s * 1e3:g} ms not applied, the loop keeps "
+                            f"the kernel's default time slice: {why}")
+    return warnings
