@@ -28,7 +28,6 @@ import math
 import sys
 import time
 
-import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -55,6 +54,7 @@ from holonomic_core.schema import ConfigError, ParamSpec
 from holonomic_core.se2 import quaternion_of_yaw
 from holonomic_bringup import loop_wire as wire
 from holonomic_bringup.loop_client import LoopClient, LoopLost
+from holonomic_bringup.packed_messages import PackedMessage
 from holonomic_bringup.process_guard import (STOP, InstanceConflict, InstanceLock,
                                              install_signal_handlers)
 
@@ -72,6 +72,16 @@ _PARAM_TYPES = {
 }
 #: twist covariance entries of the planar components (x, y, yaw) in a 6x6
 _PLANAR = (0, 1, 5)
+#: where a 3x3 (x, y, yaw) covariance, row-major, goes in a 6x6 row-major one
+_PLANAR_IN_6X6 = tuple(a * 6 + b for a in _PLANAR for b in _PLANAR)
+#: the numbers of an odometry message that change (_odometry_values)
+_ODOM_PATHS = ("header.stamp.sec", "header.stamp.nanosec", "pose.pose.position.x",
+               "pose.pose.position.y", "pose.pose.orientation.z", "pose.pose.orientation.w",
+               *(f"pose.covariance[{i}]" for i in _PLANAR_IN_6X6),
+               "twist.twist.linear.x", "twist.twist.linear.y", "twist.twist.angular.z",
+               *(f"twist.covariance[{i}]" for i in _PLANAR_IN_6X6))
+#: ground truth: an odometry message without covariances
+_TRUTH_PATHS = tuple(p for p in _ODOM_PATHS if "covariance" not in p)
 #: variance of the components a planar base does not move in (z, roll, pitch)
 _PLANAR_LOCKED_VARIANCE = 1e-9
 _SERVICE_TIMEOUT = 2.0  # [s] for the loop to execute a request
@@ -97,26 +107,38 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
     return desc
 
 
-def _stamp(seconds: float) -> TimeMsg:
+def _stamp_parts(seconds: float) -> tuple[int, int]:
+    """A time [s] as a builtin_interfaces/Time's (sec, nanosec)."""
     sec = math.floor(seconds)
-    return TimeMsg(sec=int(sec), nanosec=min(int((seconds - sec) * 1e9), 999_999_999))
+    return int(sec), min(int((seconds - sec) * 1e9), 999_999_999)
 
 
-def _yaw_quaternion(msg_orientation, yaw: float) -> None:
-    """Fill a geometry_msgs Quaternion with the rotation by ``yaw`` [rad] about z."""
-    (msg_orientation.x, msg_orientation.y, msg_orientation.z,
-     msg_orientation.w) = quaternion_of_yaw(yaw)
+def _odometry_template(frame_id: str, child_frame_id: str) -> OdometryMsg:
+    """An Odometry in ``frame_id`` of ``child_frame_id`` with the planar
+    base's fixed numbers: the locked variances (z, roll, pitch) on both
+    covariances' diagonals; everything :data:`_ODOM_PATHS` names is zero."""
+    msg = OdometryMsg()
+    msg.header.frame_id, msg.child_frame_id = frame_id, child_frame_id
+    for covariance in (msg.pose.covariance, msg.twist.covariance):
+        for i in (2, 3, 4):
+            covariance[i * 7] = _PLANAR_LOCKED_VARIANCE
+    return msg
 
 
-def _fill_covariance(target, cov3: np.ndarray) -> None:
-    """Write a 3x3 (x, y, yaw) covariance into a 6x6 row-major ROS array."""
-    full = [0.0] * 36
-    for i in (2, 3, 4):
-        full[i * 7] = _PLANAR_LOCKED_VARIANCE
-    for a, ia in enumerate(_PLANAR):
-        for b, ib in enumerate(_PLANAR):
-            full[ia * 6 + ib] = float(cov3[a, b])
-    target[:] = full
+def _odometry_values(sec: int, nanosec: int, pose, pose_cov9, twist, twist_cov9) -> list:
+    """The numbers of :data:`_ODOM_PATHS`: ``pose`` (x, y, yaw) [m, m, rad]
+    and ``twist`` (vx, vy, wz) [m/s, m/s, rad/s], their 3x3 covariances
+    row-major (9 numbers each)."""
+    _, _, qz, qw = quaternion_of_yaw(pose[2])
+    return [sec, nanosec, pose[0], pose[1], qz, qw, *pose_cov9,
+            twist[0], twist[1], twist[2], *twist_cov9]
+
+
+def _transform_paths(prefix: str) -> tuple[str, ...]:
+    """The numbers of a TransformStamped at ``prefix`` (a link's, from the URDF)."""
+    return (f"{prefix}.header.stamp.sec", f"{prefix}.header.stamp.nanosec",
+            *(f"{prefix}.transform.translation.{a}" for a in "xyz"),
+            *(f"{prefix}.transform.rotation.{a}" for a in "xyzw"))
 
 
 class BaseControllerNode(Node):
@@ -240,7 +262,7 @@ class BaseControllerNode(Node):
 
     # -- ROS interfaces -------------------------------------------------------------
     def _make_interfaces(self, info) -> None:
-        ctrl = self.config.controller
+        ctrl, model = self.config.controller, self.config.model
         # Only the latest command matters: a queue of one, so that a flood of
         # commands never builds a backlog (of memory or of stale motion).
         cmd_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
@@ -266,24 +288,48 @@ class BaseControllerNode(Node):
         self.create_service(Trigger, "~/reset_odometry", self._on_reset_odometry)
         self.create_service(SetBool, "~/enable", self._on_enable)
 
-        self._odom_msg = OdometryMsg()
-        self._odom_msg.header.frame_id = self._odom_frame
-        self._odom_msg.child_frame_id = self._base_frame
-        self._tf = TransformStamped()
-        self._tf.header.frame_id = self._odom_frame
-        self._tf.child_frame_id = self._base_frame
-        # publish_link_tf: one TransformStamped per URDF joint, reused each cycle
+        # Every cycle's messages have a fixed layout (names, frames, array
+        # lengths): serialized once, each publish writes only the numbers
+        # (packed_messages; about half the node's CPU per cycle at 1 kHz).
+        self._odom_out = PackedMessage(
+            self.odom_pub, _odometry_template(self._odom_frame, self._base_frame), _ODOM_PATHS)
+        self._truth_out = None if self.gt_pub is None else PackedMessage(
+            self.gt_pub, _odometry_template(self._odom_frame, self._base_frame), _TRUTH_PATHS)
+        # /tf: odom -> base_link (publish_tf), then with publish_link_tf
+        # parent -> child of every URDF joint
+        transforms, paths = [], []
+        if self._publish_tf:
+            transforms.append(TransformStamped())
+            transforms[-1].header.frame_id = self._odom_frame
+            transforms[-1].child_frame_id = self._base_frame
+            paths += [f"transforms[0].{path}" for path in (
+                "header.stamp.sec", "header.stamp.nanosec", "transform.translation.x",
+                "transform.translation.y", "transform.rotation.z", "transform.rotation.w")]
         self._link_tree = LinkTree.from_urdf(self.urdf) if ctrl.publish_link_tf else None
-        self._link_tfs = []
         if self._link_tree is not None:
             prefix = self.config.values["frame_prefix"]
             for joint in self._link_tree.joints:
-                tf = TransformStamped()
-                tf.header.frame_id = prefix + joint.parent
-                tf.child_frame_id = prefix + joint.child
-                self._link_tfs.append(tf)
-        self._joint_msg = JointState()
-        self._joint_msg.name = list(self.config.model.joint_names)
+                paths += _transform_paths(f"transforms[{len(transforms)}]")
+                transforms.append(TransformStamped())
+                transforms[-1].header.frame_id = prefix + joint.parent
+                transforms[-1].child_frame_id = prefix + joint.child
+        self._tf_out = PackedMessage(self.tf_pub, TFMessage(transforms=transforms),
+                                     tuple(paths)) if transforms else None
+        # joint states: with efforts, or (a driver that reports none) without
+        n = len(model.joint_names)
+        names = ("position", "velocity", "effort")
+        self._joints_out = []
+        for fields in (names[:2], names):
+            joints = JointState(name=list(model.joint_names))
+            for name in fields:
+                setattr(joints, name, [0.0] * n)
+            self._joints_out.append(PackedMessage(self.joint_pub, joints, (
+                "header.stamp.sec", "header.stamp.nanosec",
+                *(f"{name}[{i}]" for name in fields for i in range(n)))))
+        for out in (self._odom_out, self._truth_out, self._tf_out, *self._joints_out):
+            if out is not None and not out.packed:
+                self.get_logger().warn(f"publishing {out.type_name} as messages (slower): "
+                                       f"{out.why_plain}", once=True)
 
     def _on_cmd_vel(self, msg: Twist) -> None:
         self._accept((msg.linear.x, msg.linear.y, msg.angular.z), None)
@@ -365,13 +411,13 @@ class BaseControllerNode(Node):
     def _on_record(self, record) -> None:
         self._latest = record
         if self._sim:
-            stamp = _stamp(self._epoch + record.stamp)
+            stamp = _stamp_parts(self._epoch + record.stamp)
             if self.clock_pub is not None and record.flags & wire.CLOCK:
-                self.clock_pub.publish(Clock(clock=stamp))
+                self.clock_pub.publish(Clock(clock=TimeMsg(sec=stamp[0], nanosec=stamp[1])))
         else:
             # map the driver's monotonic stamp onto ROS time
             now = self.get_clock().now().nanoseconds * 1e-9
-            stamp = _stamp(now - (time.monotonic() - record.stamp))
+            stamp = _stamp_parts(now - (time.monotonic() - record.stamp))
         if record.flags & wire.PUBLISH:
             self._publish_state(stamp, record)
 
@@ -384,68 +430,44 @@ class BaseControllerNode(Node):
         else:
             log.info(text)
 
-    def _publish_state(self, stamp: TimeMsg, record) -> None:
-        x, y, yaw = (float(v) for v in record.pose)
-        msg = self._odom_msg
-        msg.header.stamp = stamp
-        msg.pose.pose.position.x = x
-        msg.pose.pose.position.y = y
-        _yaw_quaternion(msg.pose.pose.orientation, yaw)
-        _fill_covariance(msg.pose.covariance, record.pose_covariance)
-        twist = record.twist
-        msg.twist.twist.linear.x = float(twist[0])
-        msg.twist.twist.linear.y = float(twist[1])
-        msg.twist.twist.angular.z = float(twist[2])
-        _fill_covariance(msg.twist.covariance, record.twist_covariance)
-        self.odom_pub.publish(msg)
-        transforms = []
-        if self._publish_tf:
-            tf = self._tf
-            tf.header.stamp = stamp
-            tf.transform.translation.x = x
-            tf.transform.translation.y = y
-            _yaw_quaternion(tf.transform.rotation, yaw)
-            transforms.append(tf)
-        if self._link_tree is not None:
-            transforms += self._link_transforms(stamp, record.positions)
-        if transforms:
-            self.tf_pub.publish(TFMessage(transforms=transforms))
-        joints = self._joint_msg
-        joints.header.stamp = stamp
-        joints.position = record.positions.tolist()
-        joints.velocity = record.velocities.tolist()
-        efforts = record.efforts
-        joints.effort = [] if np.all(np.isnan(efforts)) else efforts.tolist()
-        self.joint_pub.publish(joints)
-        truth_pose, truth_twist = record.truth_pose, record.truth_twist
-        if self.gt_pub is not None and truth_pose is not None:
-            self._publish_ground_truth(stamp, truth_pose, truth_twist)
+    def _publish_state(self, stamp: tuple[int, int], record) -> None:
+        """Odometry, /tf, joint states (and ground truth) of one state record
+        at ``stamp`` (sec, nanosec)."""
+        sec, nanosec = stamp
+        # the record's numbers as Python floats, once (layout: loop_wire)
+        values, layout = record.data.tolist(), record.layout
+        pose = values[layout.pose]
+        self._odom_out.publish(_odometry_values(
+            sec, nanosec, pose, values[layout.pose_cov], values[layout.twist],
+            values[layout.twist_cov]))
+        if self._tf_out is not None:
+            tf_values = []
+            if self._publish_tf:
+                _, _, qz, qw = quaternion_of_yaw(pose[2])
+                tf_values += (sec, nanosec, pose[0], pose[1], qz, qw)
+            if self._link_tree is not None:
+                tf_values += self._link_values(sec, nanosec, values[layout.positions])
+            self._tf_out.publish(tf_values)
+        efforts = values[layout.efforts]
+        with_efforts = not all(math.isnan(e) for e in efforts)
+        self._joints_out[with_efforts].publish(
+            [sec, nanosec, *values[layout.positions], *values[layout.velocities],
+             *(efforts if with_efforts else ())])
+        if self._truth_out is not None and values[layout.truth_valid]:
+            truth = values[layout.truth_pose]
+            self._truth_out.publish(_odometry_values(
+                sec, nanosec, truth, (), values[layout.truth_twist], ()))
         if self._foxglove is not None:
-            self._offer_foxglove(stamp, record)
+            self._offer_foxglove(sec * 1_000_000_000 + nanosec, record)
 
-    def _link_transforms(self, stamp: TimeMsg, positions) -> list[TransformStamped]:
-        """publish_link_tf: parent -> child of every URDF joint at ``positions`` [rad]."""
-        links = self._link_tree.transforms(dict(zip(self.config.model.joint_names,
-                                                    positions.tolist())))
-        for tf, link in zip(self._link_tfs, links):
-            tf.header.stamp = stamp
-            t, q = tf.transform.translation, tf.transform.rotation
-            t.x, t.y, t.z = link.translation
-            q.x, q.y, q.z, q.w = link.rotation
-        return self._link_tfs
-
-    def _publish_ground_truth(self, stamp: TimeMsg, pose, twist) -> None:
-        msg = OdometryMsg()
-        msg.header.stamp = stamp
-        msg.header.frame_id = self._odom_frame
-        msg.child_frame_id = self._base_frame
-        msg.pose.pose.position.x = float(pose[0])
-        msg.pose.pose.position.y = float(pose[1])
-        _yaw_quaternion(msg.pose.pose.orientation, float(pose[2]))
-        msg.twist.twist.linear.x = float(twist[0])
-        msg.twist.twist.linear.y = float(twist[1])
-        msg.twist.twist.angular.z = float(twist[2])
-        self.gt_pub.publish(msg)
+    def _link_values(self, sec: int, nanosec: int, positions: list) -> list:
+        """publish_link_tf: the numbers of parent -> child of every URDF joint
+        at ``positions`` [rad] (_transform_paths' order)."""
+        links = self._link_tree.transforms(dict(zip(self.config.model.joint_names, positions)))
+        out = []
+        for link in links:
+            out += (sec, nanosec, *link.translation, *link.rotation)
+        return out
 
     # -- Foxglove -------------------------------------------------------------------
     def attach_foxglove(self, bridge) -> None:
@@ -464,12 +486,12 @@ class BaseControllerNode(Node):
             command_sink=(lambda twist: self._accept(twist, None))
             if bridge.allow_control else None))
 
-    def _offer_foxglove(self, stamp: TimeMsg, record) -> None:
+    def _offer_foxglove(self, stamp_ns: int, record) -> None:
         # the reader thread's whole cost: copy plain numbers, hand over a reference
         status = self._status
         truth_pose, truth_twist = record.truth_pose, record.truth_twist
         self._foxglove.offer(
-            stamp_ns=stamp.sec * 1_000_000_000 + stamp.nanosec,
+            stamp_ns=stamp_ns,
             pose=tuple(record.pose.tolist()),
             pose_covariance=tuple(record.pose_covariance.tolist()),
             twist=tuple(record.twist.tolist()),
