@@ -312,23 +312,26 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   its own (the driver, the controller and the simulator; the ROS node is a shell). Each row
   gives the loop's own cycle split: nearly every period over 2 ms is the loop *not running*
   (woken late, or preempted mid-cycle), not its work (HAMR cycle 0.12 ms p99). What remains:
-  * *without real-time priority* the loop is an ordinary process among everything else on
-    two cores: it waits for a CPU behind the node (about a third of a core: three 1 kHz
-    topics from Python), DDS and the bench's own processes, even on an otherwise idle machine
-    (a p99 of about 1.6 ms, a few periods over 5 ms a minute); nothing but real-time priority
-    (or a core of its own) removes that;
-  * *with SCHED_FIFO* on a standard (not PREEMPT_RT) kernel, in a VM shared with other
-    real-time loops of the same priority (the other runs' loop processes): a few periods
-    over 2 ms a minute, woken late behind them; 50-52 ms preemptions are the kernel's
-    real-time throttling (950 ms of real-time per second, `sched_rt_runtime_us`);
+  * *without real-time priority* (no SCHED_FIFO, nothing that needs privilege) the loop is
+    an ordinary process on two cores with the node, DDS and the bench's own subscriber. It
+    asks the normal scheduler for a 0.1 ms time slice (`loop.slice`, Linux 6.12+), so its
+    wake-ups preempt those processes instead of waiting for their 1.4 ms slices to end; the
+    node publishes its three 1 kHz topics as pre-serialized messages (about 40 % less CPU
+    per cycle). What is left is the time the loop waits for a CPU that another process is
+    still using inside the kernel: this VM's kernel is not preemptible (`Dynamic Preempt:
+    none` at boot), so a wake-up waits until that process leaves the kernel;
+  * *with SCHED_FIFO* on that kernel, in a VM shared with other real-time loops of the
+    same priority (the other runs' loop processes): a few periods over 2 ms a minute,
+    woken late, for the same reason or behind those loops; 50-52 ms preemptions are the
+    kernel's real-time throttling (950 ms of real-time per second, `sched_rt_runtime_us`);
   * *the XR4000 in torque mode* is physics-bound: pybullet with the drive model steps in the
     cycle: the `controller` part p99 0.8-0.9 ms of the 1 ms period with SCHED_FIFO (the
     control cycle itself 0.02 ms), the loop process at 71-73 % of a core with SCHED_FIFO; a physics
     process of its own would be the next step (docs/realtime.md);
-  * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz from Python;
-    on a loaded machine the node and the bench's own subscriber fall behind (fewer than
-    1000 joint_states a second received), and the outside periods then measure the
-    publishing path, not the loop.
+  * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz; on a loaded
+    machine the node and the bench's own subscriber fall behind (fewer than 1000
+    joint_states a second received), and the outside periods then measure the publishing
+    path, not the loop.
 """
     text += f"""
 
@@ -349,8 +352,9 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
 - **1 kHz loop** (`python bench/run.py --only loop` re-runs these rows and the latency):
   `holonomic-bringup hamr --driver mock` and `holonomic-bringup xr4000 --driver sim -p
   control_mode:=torque` with `-p control_rate:=1000.0 -p publish_rate:=1000.0`, each once with
-  `-p loop.realtime:=false` and once with the default (SCHED_FIFO 50 and mlockall where
-  permitted; the row names the policy the loop got), 60 s each, as their own processes; this
+  `-p loop.realtime:=false` (the normal scheduler with the default `loop.slice`, 0.1 ms)
+  and once with the default (SCHED_FIFO 50 and mlockall where permitted; the row names
+  the policy and slice the loop got), 60 s each, as their own processes; this
   process publishes `cmd_vel` at 100 Hz and subscribes `odom` and `joint_states`. The loop's
   own period statistics come from its diagnostics (the loop process's cycle timestamps; 1 Hz,
   each over the last 2000 cycles, overlapping and covering the measurement; periods over 2 ms
