@@ -505,3 +505,45 @@ def memory_growth(seconds: float = 240.0, robot: str = "hamr") -> dict:
             "rss_at_1min_mb": after_minute[0], "rss_end_mb": samples[-1][1],
             "growth_after_1min_mb": samples[-1][1] - after_minute[0],
             "max_growth_after_1min_mb": max(after_minute) - after_minute[0]}
+
+
+def slice_ab(seconds: float = 25.0, reps: int = 3) -> list[dict]:
+    """The 1 kHz HAMR row without real-time priority (as loop_1khz_rows),
+    alternately with the kernel's default time slice (``loop.slice`` 0)
+    and the default 0.1 ms, ``reps`` times each: an A/B in one window of
+    whatever else the machine runs (docs/realtime.md)."""
+    rows = []
+    for rep in range(reps):
+        for name, slice_s in (("kernel slice", 0.0), ("loop.slice 0.1 ms", 1e-4)):
+            result = _measure_loop(
+                ["hamr", "--driver", "mock", "-p", "loop.realtime:=false",
+                 "-p", f"loop.slice:={slice_s}", "-p", "loop.watchdog_timeout:=30.0"],
+                "bench_slice_ab", f"slice_ab_{rep}_{int(slice_s > 0)}", seconds,
+                publish_rate=1000.0, outside=True)
+            rows.append({"variant": name, "rep": rep, "load": os.getloadavg()[0], **result})
+            print(_ab_line(rows[-1]), flush=True)
+    return rows
+
+
+def _ab_line(r: dict) -> str:
+    return (f"{r['variant']:18s} load {r['load']:5.1f} | {r['scheduling']:28s} | p99 "
+            f"{r['period_p99_ms_median_window']:.3f} ms (worst window "
+            f"{r['period_p99_ms_worst_window']:.3f}), max {r['period_max_ms']:.2f} ms, "
+            f"> 2 ms: {r['periods_over_2ms']}, > 5 ms: {r['periods_over_5ms']}, woke late p99 "
+            f"{r['split']['wake_late_p99_ms']:.3f} ms | CPU node "
+            f"{r['node_cpu_percent']:.0f} %, loop {r['loop_cpu_percent']:.0f} % | "
+            f"{r['joint_states_hz']:.0f} joint_states/s")
+
+
+if __name__ == "__main__":
+    # python bench/ros_loop.py slice-ab [SECONDS [REPS]]
+    if len(sys.argv) < 2 or sys.argv[1] != "slice-ab":
+        sys.exit("usage: python bench/ros_loop.py slice-ab [SECONDS [REPS]]")
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "97")
+    import rclpy
+    rclpy.init()
+    try:
+        slice_ab(*(float(a) for a in sys.argv[2:3]), *(int(a) for a in sys.argv[3:4]))
+    finally:
+        rclpy.try_shutdown()
