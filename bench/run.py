@@ -317,9 +317,11 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     asks the normal scheduler for a 0.1 ms time slice (`loop.slice`, Linux 6.12+), so its
     wake-ups preempt those processes instead of waiting for their 1.4 ms slices to end; the
     node publishes its three 1 kHz topics as pre-serialized messages (about 40 % less CPU
-    per cycle). What is left is the time the loop waits for a CPU that another process is
-    still using inside the kernel: this VM's kernel is not preemptible (`Dynamic Preempt:
-    none` at boot), so a wake-up waits until that process leaves the kernel;
+    per cycle). Both came after the 14:06 rows (docs/realtime.md has their A/B on the
+    loaded machine: wake-up lateness p99 cut by 43-68 % in five pairs of six). What a
+    slice cannot change: the loop's share of the CPU when other processes want more
+    than two cores, and this VM's kernel, which is not preemptible (`Dynamic Preempt:
+    none` at boot): a wake-up waits until the running process leaves the kernel;
   * *with SCHED_FIFO* on that kernel, in a VM shared with other real-time loops of the
     same priority (the other runs' loop processes): a few periods over 2 ms a minute,
     woken late, for the same reason or behind those loops; 50-52 ms preemptions are the
