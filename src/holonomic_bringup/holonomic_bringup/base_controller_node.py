@@ -290,7 +290,7 @@ class BaseControllerNode(Node):
 
         # Every cycle's messages have a fixed layout (names, frames, array
         # lengths): serialized once, each publish writes only the numbers
-        # (packed_messages; about half the node's CPU per cycle at 1 kHz).
+        # (packed_messages: 40 % less of the node's CPU per cycle, docs/realtime.md).
         self._odom_out = PackedMessage(
             self.odom_pub, _odometry_template(self._odom_frame, self._base_frame), _ODOM_PATHS)
         self._truth_out = None if self.gt_pub is None else PackedMessage(
