@@ -113,15 +113,17 @@ def _stamp_parts(seconds: float) -> tuple[int, int]:
     return int(sec), min(int((seconds - sec) * 1e9), 999_999_999)
 
 
-def _odometry_template(frame_id: str, child_frame_id: str) -> OdometryMsg:
-    """An Odometry in ``frame_id`` of ``child_frame_id`` with the planar
-    base's fixed numbers: the locked variances (z, roll, pitch) on both
-    covariances' diagonals; everything :data:`_ODOM_PATHS` names is zero."""
+def _odometry_template(frame_id: str, child_frame_id: str,
+                       covariance: bool = True) -> OdometryMsg:
+    """An Odometry in ``frame_id`` of ``child_frame_id``; with ``covariance``
+    the planar base's fixed numbers, the locked variances (z, roll, pitch) on
+    both covariances' diagonals (ground truth: none). Everything
+    :data:`_ODOM_PATHS` names is zero."""
     msg = OdometryMsg()
     msg.header.frame_id, msg.child_frame_id = frame_id, child_frame_id
-    for covariance in (msg.pose.covariance, msg.twist.covariance):
+    for cov in (msg.pose.covariance, msg.twist.covariance) if covariance else ():
         for i in (2, 3, 4):
-            covariance[i * 7] = _PLANAR_LOCKED_VARIANCE
+            cov[i * 7] = _PLANAR_LOCKED_VARIANCE
     return msg
 
 
@@ -294,7 +296,8 @@ class BaseControllerNode(Node):
         self._odom_out = PackedMessage(
             self.odom_pub, _odometry_template(self._odom_frame, self._base_frame), _ODOM_PATHS)
         self._truth_out = None if self.gt_pub is None else PackedMessage(
-            self.gt_pub, _odometry_template(self._odom_frame, self._base_frame), _TRUTH_PATHS)
+            self.gt_pub, _odometry_template(self._odom_frame, self._base_frame, False),
+            _TRUTH_PATHS)
         # /tf: odom -> base_link (publish_tf), then with publish_link_tf
         # parent -> child of every URDF joint
         transforms, paths = [], []

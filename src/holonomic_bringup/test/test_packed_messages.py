@@ -69,9 +69,8 @@ def test_odometry_carries_pose_twist_and_both_covariances_in_the_6x6_layout():
 
 def test_ground_truth_is_an_odometry_without_covariance():
     publisher = _Publisher()
-    template = Odometry()
-    template.header.frame_id, template.child_frame_id = "world", "robot_1/base_link"
-    out = PackedMessage(publisher, template, _TRUTH_PATHS)
+    out = PackedMessage(publisher, _odometry_template("world", "robot_1/base_link", False),
+                        _TRUTH_PATHS)
     assert out.packed, out.why_plain
     out.publish(_odometry_values(3, 7, (-4.0, 2.0, -math.pi / 2), (), (1.0, 2.0, 3.0), ()))
     msg = _received(out, publisher, Odometry)
