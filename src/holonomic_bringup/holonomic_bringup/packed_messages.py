@@ -12,15 +12,18 @@ cycle to the next.
 middleware's own serializer (``rclpy.serialization``). It finds where each
 changing number lands in those bytes by giving every such field a marker
 value first. Each publish then writes the cycle's numbers into a copy of the
-bytes (one ``struct.pack_into`` per run of adjacent fields) and hands rclpy the serialized message
-(``Publisher.publish(bytes)``), which skips the conversion and the
-serialization.
+bytes (one ``struct.pack_into`` per run of adjacent fields) and hands rclpy
+the serialized message (``Publisher.publish(bytes)``), which skips the
+conversion and the serialization.
 
 It checks itself when built: sample numbers packed this way must
-deserialize to the message holding the same numbers. A middleware whose encoding does not fit (a marker not found
-exactly once, fields out of order, a different result) puts it in the plain
-mode. That mode sets the same fields on the message object and publishes it
-as before. Either way the subscribers receive the same message.
+deserialize to the message holding the same numbers (compared as messages:
+the serializer does not write the alignment padding after a string, so
+those bytes are arbitrary). A middleware whose encoding does not fit (a
+marker not found exactly once, fields out of order, a different result)
+puts it in the plain mode, which sets the same fields on the message object
+and publishes it as before. Either way the subscribers receive the same
+message.
 """
 
 from __future__ import annotations
@@ -161,8 +164,6 @@ class PackedMessage:
         return runs, self._serialized([0 if f != "d" else 0.0 for f in self._formats])
 
     def _check(self) -> None:
-        # compared as messages: the serializer leaves its alignment padding
-        # (after a string) unwritten, so the bytes there are arbitrary
         sample = [(k * 7919 + 1) if f != "d" else (k + 1) * -0.123456789 + 1e-3 * k
                   for k, f in enumerate(self._formats)]
         if deserialize_message(self.pack(sample), type(self._msg)) != self._filled(sample):
