@@ -8,6 +8,7 @@ own (or a forked child), so the test process's own scheduling is untouched.
 
 from __future__ import annotations
 
+import ast
 import os
 import platform
 import threading
@@ -71,7 +72,7 @@ def test_a_short_slice_needs_no_privilege_and_keeps_the_nice_value():
         return (refused, realtime.current_slice(), os.getpriority(os.PRIO_PROCESS, 0) - nice,
                 realtime.current_policy())
 
-    unprivileged, (refused, got, nice_change, policy) = eval(_unprivileged_child(ask))
+    unprivileged, (refused, got, nice_change, policy) = ast.literal_eval(_unprivileged_child(ask))
     assert unprivileged
     assert nice_change == 0
     if _CUSTOM_SLICES:
