@@ -318,7 +318,7 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     wake-ups preempt those processes instead of waiting for their 1.4 ms slices to end; the
     node publishes its three 1 kHz topics as pre-serialized messages (about 40 % less CPU
     per cycle). Both came after the 14:06 rows (docs/realtime.md has their A/B on the
-    loaded machine: wake-up lateness p99 cut by 43-68 % in five pairs of six). What a
+    loaded machine: wake-up lateness p99 cut by 43-74 % in seven pairs of eight). What a
     slice cannot change: the loop's share of the CPU when other processes want more
     than two cores, and this VM's kernel, which is not preemptible (`Dynamic Preempt:
     none` at boot): a wake-up waits until the running process leaves the kernel;
