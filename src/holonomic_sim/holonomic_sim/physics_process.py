@@ -46,13 +46,15 @@ loop's next read raises :class:`~holonomic_core.driver.DriverCommunicationError`
 naming it and its exit status: the controller faults and disarms (there are
 no motors left to move).
 
-Scheduling: the physics process runs SCHED_OTHER even when the loop holds
-SCHED_FIFO (it is spawned before the loop asks for it, and sets it again
-itself). It is the plant, not the controller: at real-time priority its
-0.8 ms of CPU per millisecond would take most of a core from the ROS node
-and DDS on a 2-core machine and could be throttled by the kernel with the
-loop; starved, it slows the simulated world (sim time falls behind), which
-the controller sees as an older reading, as it would see a late drive.
+Scheduling (:func:`plant_priority`): when the loop runs real-time (its own
+process, ``loop.realtime``), the physics process asks for SCHED_FIFO one
+step below the loop (``loop.priority - 1``), otherwise it stays SCHED_OTHER
+like the loop. Below: it never preempts the loop. Real-time at all: a plant
+starved by the ROS node, DDS or other load stops the readings, and the
+controller faults after ``safety.reading_timeout`` (50 ms) as it would on a
+silent drive -- measured on the loaded 2-core machine at SCHED_OTHER. It
+costs 13-19 % of a core (XR4000, 1 kHz, measured), so the node and DDS keep
+the rest and the real-time budget (95 % of each second) is far off.
 """
 
 from __future__ import annotations
@@ -70,6 +72,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from holonomic_core.driver import DriverCommunicationError, GroundTruth, JointReading
+from holonomic_core.schema import ConfigError
 
 #: command modes: brakes on (disarmed), joint speeds [rad/s], joint torques [N m]
 HOLD, VELOCITY, EFFORT = 0.0, 1.0, 2.0
@@ -120,6 +123,23 @@ class StateLayout:
 _FLAGS, _STAMP, _LOST = 0, 1, 2
 
 
+def _read_newest(fd: int, size: int) -> bytes | None:
+    """The newest ``size``-byte record waiting in non-blocking pipe ``fd``
+    (every one before it is read and dropped: the latest wins); None when
+    none is waiting, b"" at end-of-file. Each record was one write under
+    PIPE_BUF (atomic), so reads of a multiple of ``size`` return whole
+    records."""
+    newest = None
+    while True:
+        try:
+            data = os.read(fd, 64 * size)
+        except BlockingIOError:
+            return newest
+        if not data:
+            return newest if newest is not None else b""
+        newest = data[-size:]
+
+
 def _send(sock: socket.socket, message) -> bool:
     try:
         sock.send(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
@@ -168,6 +188,9 @@ class PhysicsLink:
     def _await_ready(self) -> dict:
         deadline = time.monotonic() + START_TIMEOUT
         message = self._receive(deadline)
+        if message is not None and message[0] == "config_error":
+            self.close()
+            raise ConfigError(*message[1])
         if message is None or message[0] != "ready":
             text = message[1] if message is not None and message[0] == "error" else (
                 f"did not start{self._exit_text(STOP_TIMEOUT)}")
@@ -208,16 +231,13 @@ class PhysicsLink:
     def _drain(self) -> bool:
         """Take the newest state record; False when none was waiting.
         Raises DriverCommunicationError when the physics process is gone."""
-        size = self._record.nbytes
-        try:
-            data = os.read(self._state_r, 64 * size)
-        except BlockingIOError:
+        data = _read_newest(self._state_r, self._record.nbytes)
+        if data is None:
             return False
         if not data:
             raise DriverCommunicationError(
                 f"the simulator's physics process ended{self._exit_text(0.2)}", DEVICE)
-        # whole records only: each write is one record under PIPE_BUF (atomic)
-        self._record[:] = np.frombuffer(data[-size:], dtype=np.float64)
+        self._record[:] = np.frombuffer(data, dtype=np.float64)
         return True
 
     def latest(self) -> JointReading:
@@ -328,28 +348,44 @@ def _write_state(driver, state_fd: int, record: np.ndarray, layout: StateLayout,
         pass            # the loop is not reading: it takes the newest when it does
 
 
+def plant_priority(params) -> int | None:
+    """The physics process's SCHED_FIFO priority for the validated
+    ``params``: one below the loop's when the loop runs real-time in its own
+    process; None (SCHED_OTHER) otherwise, or when the loop is at priority 1."""
+    if not (params.get("loop.realtime") and params.get("loop.process", True)):
+        return None
+    priority = int(params["loop.priority"]) - 1
+    return priority if priority >= 1 else None
+
+
 def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
     """Build the SimDriver from the set-up message, answer ``ready``, then
     step it on the wall clock until the loop goes. Returns the exit code
     (0: the loop closed the channels; 2: the driver did not configure)."""
-    from holonomic_core.driver import DriverError
-    from holonomic_core.schema import ConfigError
-    from holonomic_sim.sim_driver import SimDriver
-
     from holonomic_core.config import build_model
+    from holonomic_core.driver import DriverError
+    from holonomic_core.realtime import set_fifo
+    from holonomic_sim.sim_driver import SimDriver
 
     flat, params, rate = pickle.loads(sock.recv(MAX_MESSAGE))
     params["sim.physics_process"] = False
+    priority = plant_priority(params)
+    refused = None if priority is None else set_fifo(priority)
+    scheduling = ("SCHED_OTHER" if priority is None else f"SCHED_FIFO {priority}"
+                  if refused is None else f"SCHED_OTHER ({refused})")
     model = build_model(flat)[0]
     driver = SimDriver(model, params, rate)
     try:
         driver.configure()
-    except (DriverError, ConfigError) as exc:
+    except ConfigError as exc:      # the loop raises the same (bad sim.* values)
+        _send(sock, ("config_error", (exc.key, exc.value, exc.allowed)))
+        return 2
+    except DriverError as exc:
         _send(sock, ("error", str(exc)))
         return 2
     _send(sock, ("ready", {"hidden_truth": driver.hidden_truth,
                            "wheel_radii": driver.wheel_radii,
-                           "friction": driver.friction, "pid": os.getpid()}))
+                           "friction": driver.friction, "scheduling": scheduling}))
     layout = StateLayout(len(model.joint_names))
     record = np.zeros(layout.size)
     width = 8 * (1 + layout.joints)
@@ -360,7 +396,6 @@ def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
     _write_state(driver, state_fd, record, layout, reading, False)
     stepped_to = time.monotonic()
     sock.setblocking(False)
-    command = None
     try:
         while True:
             try:                           # requests; end-of-file: the loop is gone
@@ -371,14 +406,11 @@ def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
                     _send(sock, ("contacts", driver.wheel_contacts()))
             except BlockingIOError:
                 pass
-            try:
-                data = os.read(cmd_fd, 64 * width)
-                if not data:
-                    return 0
-                command = np.frombuffer(data[-width:], dtype=np.float64)
-            except BlockingIOError:
-                pass
-            if command is not None:
+            data = _read_newest(cmd_fd, width)
+            if data == b"":
+                return 0
+            if data is not None:
+                command = np.frombuffer(data, dtype=np.float64)
                 if command[0] == HOLD:
                     driver.deactivate()
                 else:
@@ -388,7 +420,6 @@ def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
                         driver.write_velocities(command[1:])
                     else:
                         driver.write_efforts(command[1:])
-                command = None
             periods = int((time.monotonic() - stepped_to) / period)
             if periods > MAX_CATCH_UP:
                 stepped_to += (periods - MAX_CATCH_UP) * period      # time lost
@@ -424,7 +455,7 @@ def main(argv: list[str] | None = None) -> int:
     if os.getppid() != parent:       # the loop died before prctl
         return 0
     try:
-        # the plant, not the controller: never real-time (see the module docstring)
+        # whatever the spawning thread had; serve() decides (plant_priority)
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (AttributeError, OSError):
         pass

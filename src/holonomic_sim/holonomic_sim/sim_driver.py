@@ -53,6 +53,7 @@ import numpy as np
 
 from holonomic_core.driver import Driver, DriverCommunicationError, GroundTruth, JointReading
 from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_sim.physics_process import EFFORT, HOLD, VELOCITY, PhysicsLink
 
 #: a base tilted more than this has tipped over: stop reporting a valid state
 _TIP_OVER = math.radians(30.0)
@@ -155,7 +156,6 @@ class SimDriver(Driver):
 
         p = self.params
         if p.get("sim.physics_process"):
-            from holonomic_sim.physics_process import PhysicsLink
             self._link = PhysicsLink(self.model, p, self.control_rate)
             info = self._link.info
             self.hidden_truth = info["hidden_truth"]
@@ -261,14 +261,12 @@ class SimDriver(Driver):
 
     def _on_activate(self) -> None:
         if self._link is not None:
-            from holonomic_sim.physics_process import VELOCITY
             self._link.command(VELOCITY)
             return
         self._robot.command_velocities(np.zeros(len(self.model.joint_names)))
 
     def _on_deactivate(self) -> None:
         if self._link is not None:
-            from holonomic_sim.physics_process import HOLD
             self._link.command(HOLD)
             return
         self._robot.hold()
@@ -303,14 +301,12 @@ class SimDriver(Driver):
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
         if self._link is not None:
-            from holonomic_sim.physics_process import VELOCITY
             self._link.command(VELOCITY, velocities)
             return
         self._robot.command_velocities(velocities)
 
     def _on_write_efforts(self, efforts: np.ndarray) -> None:
         if self._link is not None:
-            from holonomic_sim.physics_process import EFFORT
             self._link.command(EFFORT, efforts)
             return
         self._robot.command_efforts(efforts)
@@ -356,6 +352,7 @@ class SimDriver(Driver):
             values["wheel_friction"] = " ".join(f"{mu:.3f}" for mu in self.friction)
         if self._link is not None:
             values["physics_process"] = (f"pid {self._link.pid}, "
+                                         f"{self._link.info['scheduling']}, "
                                          f"{self._link.lost_periods} periods lost")
         return values
 

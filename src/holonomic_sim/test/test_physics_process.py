@@ -192,3 +192,25 @@ def test_a_shared_world_refuses_a_physics_process():
             SimDriver(cfg.model, cfg.values, cfg.controller.control_rate, world=world)
     finally:
         world.close()
+
+
+def test_a_bad_sim_value_found_in_the_physics_process_is_the_same_config_error():
+    # a caster offset spread on a DDROT (no casters): the in-process driver
+    # raises ConfigError naming the key from configure; so must the link
+    cfg = load_config("hamr", {"sim.physics_process": True, "sim.caster_offset_spread": 0.1})
+    driver = SimDriver(cfg.model, cfg.values, cfg.controller.control_rate)
+    with pytest.raises(ConfigError, match="sim.caster_offset_spread"):
+        driver.configure()
+    assert driver.physics_pid is None
+
+
+@pytest.mark.parametrize("loop, expected", [
+    ({"loop.realtime": True, "loop.process": True, "loop.priority": 50}, 49),   # just below
+    ({"loop.realtime": False, "loop.process": True, "loop.priority": 50}, None),
+    ({"loop.realtime": True, "loop.process": False, "loop.priority": 50}, None),  # a thread
+    ({"loop.realtime": True, "loop.process": True, "loop.priority": 1}, None),   # no room below
+])
+def test_the_plant_runs_real_time_just_below_a_real_time_loop_only(loop, expected):
+    from holonomic_sim.physics_process import plant_priority
+
+    assert plant_priority(loop) == expected

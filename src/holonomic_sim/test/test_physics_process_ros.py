@@ -9,6 +9,7 @@ import os
 import signal
 from pathlib import Path
 
+import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from holonomic_testing.ros_probe import Probe, wait_until
@@ -51,7 +52,10 @@ def test_a_dead_physics_process_faults_the_robot_once_and_the_node_stays_up(
             v = _driver_values(probe)
             return v.get("level") == DiagnosticStatus.ERROR and \
                 "physics process ended" in v.get("message", "") and v
-        values = wait_until(reported, 10.0, "an ERROR naming the physics process")
+        try:
+            values = wait_until(reported, 10.0, "an ERROR naming the physics process")
+        except TimeoutError:
+            raise AssertionError(f"{_driver_values(probe)}\n{proc.log()}")
         assert values["controller_state"] == "fault" and "SIGKILL" in values["message"]
         assert proc.proc.poll() is None          # the node (and its loop) stay up
         answer = probe.enable(True)              # re-arming fails: no plant to drive
@@ -65,8 +69,13 @@ def test_a_dead_physics_process_faults_the_robot_once_and_the_node_stays_up(
     assert "Traceback" not in log, log
 
 
-def test_stopping_the_node_ends_its_physics_process(ros, start_bringup):
-    ns = "physstop"
+def _parent(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(") ", 1)[1].split()[1])
+
+
+@pytest.mark.parametrize("victim", ["node", "loop"])
+def test_the_physics_process_ends_with_the_node_or_its_loop_process(ros, start_bringup, victim):
+    ns = f"physend{victim}"
     proc = start_bringup("xr4000", "--namespace", ns, "-p", "sim.physics_process:=true")
     probe = Probe(ros, ns)
     try:
@@ -75,6 +84,11 @@ def test_stopping_the_node_ends_its_physics_process(ros, start_bringup):
                             and _driver_values(probe), 20.0, "the physics process's pid")
         pid = int(values["physics_process"].split()[1].rstrip(","))
         assert _alive(pid)
+        loop = _parent(pid)
+        assert _parent(loop) == proc.proc.pid        # node -> loop process -> physics
+        if victim == "loop":
+            os.kill(loop, signal.SIGKILL)            # no clean-up in the loop
+            wait_until(lambda: not _alive(pid), 10.0, "the physics process to end")
     finally:
         probe.close()
     assert proc.stop(signal.SIGTERM) == 0
