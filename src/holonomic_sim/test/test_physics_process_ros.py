@@ -32,6 +32,17 @@ def _alive(pid: int) -> bool:
         return False
 
 
+def _physics_pid(probe) -> int:
+    """The physics process's pid from the driver's diagnostics
+    (``physics_process: pid 1234, SCHED_FIFO 49, 0 periods lost``); it is alive."""
+    probe.wait_ready()
+    values = wait_until(lambda: "physics_process" in _driver_values(probe)
+                        and _driver_values(probe), 20.0, "the physics process's pid")
+    pid = int(values["physics_process"].split()[1].rstrip(","))
+    assert _alive(pid)
+    return pid
+
+
 def test_a_dead_physics_process_faults_the_robot_once_and_the_node_stays_up(
         ros, start_bringup):
     ns = "physdead"
@@ -39,12 +50,7 @@ def test_a_dead_physics_process_faults_the_robot_once_and_the_node_stays_up(
                          "-p", "sim.physics_process:=true")
     probe = Probe(ros, ns)
     try:
-        probe.wait_ready()
-        values = wait_until(lambda: "physics_process" in _driver_values(probe)
-                            and _driver_values(probe), 20.0, "the physics process's pid")
-        # "pid 1234, 0 periods lost"
-        pid = int(values["physics_process"].split()[1].rstrip(","))
-        assert _alive(pid)
+        pid = _physics_pid(probe)
         probe.drive((0.3, 0.0, 0.0), 0.5)
         os.kill(pid, signal.SIGKILL)
 
@@ -79,11 +85,7 @@ def test_the_physics_process_ends_with_the_node_or_its_loop_process(ros, start_b
     proc = start_bringup("xr4000", "--namespace", ns, "-p", "sim.physics_process:=true")
     probe = Probe(ros, ns)
     try:
-        probe.wait_ready()
-        values = wait_until(lambda: "physics_process" in _driver_values(probe)
-                            and _driver_values(probe), 20.0, "the physics process's pid")
-        pid = int(values["physics_process"].split()[1].rstrip(","))
-        assert _alive(pid)
+        pid = _physics_pid(probe)
         loop = _parent(pid)
         assert _parent(loop) == proc.proc.pid        # node -> loop process -> physics
         if victim == "loop":
