@@ -4,8 +4,10 @@ On a real robot the plant is not in the control loop's process: the loop
 writes setpoints to the drives and reads their latest feedback, and a slow
 loop delays neither the motors nor the floor. With the physics stepped
 inside :meth:`SimDriver.read <holonomic_sim.sim_driver.SimDriver.read>`
-(the default), a pybullet step with the drive model (0.8-0.9 ms for an
-XR4000 at 1 kHz) is most of the loop's 1 ms period. Here it runs apart:
+(the default), a pybullet step with the drive model runs inside the loop's
+cycle (XR4000 at 1 kHz: 0.12 ms of CPU per period offline, 23 % of a core
+under load; docs/realtime.md) and a late step makes a late cycle. Here it
+runs apart:
 
 * the **physics process** (``python -m holonomic_sim.physics_process``,
   :func:`serve`) owns an ordinary in-process :class:`SimDriver` (its own
@@ -53,7 +55,7 @@ like the loop. Below: it never preempts the loop. Real-time at all: a plant
 starved by the ROS node, DDS or other load stops the readings, and the
 controller faults after ``safety.reading_timeout`` (50 ms) as it would on a
 silent drive -- measured on the loaded 2-core machine at SCHED_OTHER. It
-costs 13-19 % of a core (XR4000, 1 kHz, measured), so the node and DDS keep
+costs 13-23 % of a core (XR4000, 1 kHz, measured), so the node and DDS keep
 the rest and the real-time budget (95 % of each second) is far off.
 """
 
