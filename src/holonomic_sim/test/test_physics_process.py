@@ -214,3 +214,11 @@ def test_the_plant_runs_real_time_just_below_a_real_time_loop_only(loop, expecte
     from holonomic_sim.physics_process import plant_priority
 
     assert plant_priority(loop) == expected
+
+
+def test_simulated_can_drives_refuse_a_physics_process():
+    # --sim-drives steps its physics in a thread on the wall clock already
+    cfg = load_config("hamr", {"driver": "odrive_can", "sim_drives": True,
+                               "sim.physics_process": True})
+    with pytest.raises(ConfigError, match="sim.physics_process"):
+        cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
