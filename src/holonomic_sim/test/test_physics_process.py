@@ -76,7 +76,11 @@ def test_lifecycle_runs_the_physics_apart_and_close_ends_it():
 
 
 def test_a_dead_physics_process_faults_the_loop_and_disarms():
-    cfg, driver = _driver(True, cmd_timeout=0.0)
+    # the controller is stepped every 20 ms here and a loaded machine may
+    # stall the physics for longer than the 50 ms reading timeout or the
+    # tracking check: both widened, so the fault is the process's death
+    cfg, driver = _driver(True, cmd_timeout=0.0, **{"safety.reading_timeout": 2.0,
+                                                    "safety.tracking_timeout": 0.0})
     driver.configure()
     ctrl = BaseController(cfg, driver)
     try:
@@ -84,6 +88,8 @@ def test_a_dead_physics_process_faults_the_loop_and_disarms():
         wait_until(lambda: ctrl.step() and future.done(), 10.0, "the controller to arm")
         assert future.result()[0] and driver.armed
         ctrl.set_command((SPEED, 0.0, 0.0))
+        ctrl.step()
+        assert ctrl.fault is None
         os.kill(driver.physics_pid, signal.SIGKILL)
 
         def faulted():
