@@ -162,7 +162,6 @@ class PhysicsLink:
         self._record = np.zeros(self.layout.size)
         self._command = np.zeros(1 + len(model.joint_names))
         self._fault_text = "the simulated base failed"
-        self._contacts = None
         self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         cmd_r, self._cmd_w = os.pipe()
         self._state_r, state_w = os.pipe()
