@@ -6,8 +6,7 @@ loop delays neither the motors nor the floor. With the physics stepped
 inside :meth:`SimDriver.read <holonomic_sim.sim_driver.SimDriver.read>`
 (the default), a pybullet step with the drive model runs inside the loop's
 cycle (XR4000 at 1 kHz: 23-27 % of a core, docs/realtime.md) and a late
-step makes a late cycle. Here it
-runs apart:
+step makes a late cycle. Here it runs apart:
 
 * the **physics process** (``python -m holonomic_sim.physics_process``,
   :func:`serve`) owns an ordinary in-process :class:`SimDriver` (its own
