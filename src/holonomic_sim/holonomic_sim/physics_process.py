@@ -54,7 +54,7 @@ like the loop. Below: it never preempts the loop. Real-time at all: a plant
 starved by the ROS node, DDS or other load stops the readings, and the
 controller faults after ``safety.reading_timeout`` (50 ms) as it would on a
 silent drive -- measured on the loaded 2-core machine at SCHED_OTHER. It
-costs 13-23 % of a core (XR4000, 1 kHz, measured), so the node and DDS keep
+costs 13-27 % of a core (XR4000, 1 kHz, measured), so the node and DDS keep
 the rest and the real-time budget (95 % of each second) is far off.
 """
 
