@@ -34,7 +34,15 @@ lifted              --      base held in the air, wheels off the floor (bench te
 drive.*             ...     the drive model (see :func:`drive_specs`)
 gui                 --      open the pybullet GUI instead of DIRECT mode
 start_pose          m, rad  (x, y, yaw) of base_link in the world at start
+physics_process     --      step the physics in a process of its own, on the wall clock
 ================== ======= ============================================================
+
+With ``sim.physics_process: true`` the world lives in a process of its own
+(:mod:`holonomic_sim.physics_process`) that steps it in real time; ``read``
+then returns the newest state without stepping (the plant no longer runs
+inside the control cycle, as on a real robot) and the run is no longer
+lock-step: a loop that calls faster than real time sees the same reading
+again.
 """
 
 from __future__ import annotations
@@ -45,6 +53,7 @@ import numpy as np
 
 from holonomic_core.driver import Driver, DriverCommunicationError, GroundTruth, JointReading
 from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_sim.physics_process import EFFORT, HOLD, VELOCITY, PhysicsLink
 
 #: a base tilted more than this has tipped over: stop reporting a valid state
 _TIP_OVER = math.radians(30.0)
@@ -76,6 +85,11 @@ class SimDriver(Driver):
         #: config keys -> true values (what a perfect calibration writes)
         self.hidden_truth: dict[str, float] = {}
         self._reading_offset = np.zeros(len(model.joint_names))
+        #: the physics process's link (sim.physics_process), else None
+        self._link = None
+        if params.get("sim.physics_process") and world is not None:
+            raise ConfigError("sim.physics_process", True,
+                              "false in a shared world (--fleet steps one world for all robots)")
 
     @classmethod
     def param_specs(cls, model) -> list[ParamSpec]:
@@ -127,6 +141,13 @@ class SimDriver(Driver):
                       "holonomic-drive-test asks of a real robot); ground truth stays at "
                       "the start.",
                       default=False),
+            ParamSpec("sim.physics_process", "bool",
+                      "Step the physics (pybullet and the drive model) in a process of its own "
+                      "on the wall clock instead of inside each read: the control loop writes "
+                      "commands and takes the newest state, as with real drives (the plant's "
+                      "CPU leaves the control cycle); not lock-step, so runs are not "
+                      "reproducible step for step (docs/realtime.md).",
+                      default=False),
         ] + drive_specs()
 
     # -- lifecycle ---------------------------------------------------------------
@@ -134,6 +155,13 @@ class SimDriver(Driver):
         from holonomic_sim.world import Pose2D, SimError, SimWorld
 
         p = self.params
+        if p.get("sim.physics_process"):
+            self._link = PhysicsLink(self.model, p, self.control_rate)
+            info = self._link.info
+            self.hidden_truth = info["hidden_truth"]
+            self.wheel_radii = info["wheel_radii"]
+            self.friction = info["friction"]
+            return
         start = tuple(p["sim.start_pose"])
         if len(start) != 3:
             raise ConfigError("sim.start_pose", start, "exactly 3 numbers (x, y, yaw)")
@@ -232,12 +260,21 @@ class SimDriver(Driver):
         return zeros
 
     def _on_activate(self) -> None:
+        if self._link is not None:
+            self._link.command(VELOCITY)
+            return
         self._robot.command_velocities(np.zeros(len(self.model.joint_names)))
 
     def _on_deactivate(self) -> None:
+        if self._link is not None:
+            self._link.command(HOLD)
+            return
         self._robot.hold()
 
     def _on_close(self) -> None:
+        if self._link is not None:
+            self._link.close()
+            self._link = None
         if self._world is not None:
             if self._shared_world is None:
                 self._world.close()
@@ -247,6 +284,9 @@ class SimDriver(Driver):
 
     # -- I/O ----------------------------------------------------------------------
     def _on_read(self) -> JointReading:
+        if self._link is not None:
+            # the physics process applied the zero errors and the tip-over check
+            return self._link.latest()
         if self._shared_world is None:
             self._world.step(self.substeps)
         if self._robot.tilt() > _TIP_OVER:
@@ -260,23 +300,42 @@ class SimDriver(Driver):
         return JointReading(self._world.time, positions, velocities, efforts)
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
+        if self._link is not None:
+            self._link.command(VELOCITY, velocities)
+            return
         self._robot.command_velocities(velocities)
 
     def _on_write_efforts(self, efforts: np.ndarray) -> None:
+        if self._link is not None:
+            self._link.command(EFFORT, efforts)
+            return
         self._robot.command_efforts(efforts)
 
     # -- capabilities -------------------------------------------------------------
+    @property
+    def physics_pid(self) -> int | None:
+        """The physics process's PID (sim.physics_process), else None."""
+        return self._link.pid if self._link is not None else None
+
     def sim_time(self) -> float | None:
+        if self._link is not None:
+            return self._link.sim_time
         return self._world.time if self._world is not None else None
 
     def ground_truth(self) -> GroundTruth | None:
+        if self._link is not None:
+            return self._link.ground_truth()
         if self._robot is None:
             return None
         return GroundTruth(self._world.time, self._robot.pose(), self._robot.body_twist())
 
     def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The floor's contact points on the robot and their planar friction
-        forces, in base_link ([m], [N]; n x 2 each); simulation only."""
+        forces, in base_link ([m], [N]; n x 2 each); simulation only. With
+        sim.physics_process a round trip to the physics process (None if it
+        does not answer)."""
+        if self._link is not None:
+            return self._link.wheel_contacts()
         if self._robot is None:
             return None
         return self._robot.wheel_contacts()
@@ -288,9 +347,13 @@ class SimDriver(Driver):
                        "motors": "ideal" if self.params["sim.ideal_motors"] else "drive model"})
         if self.wheel_radii:
             values["simulated_wheel_radii"] = " ".join(f"{r:.5f}" for r in self.wheel_radii)
-        if self._world is not None:
-            values["sim_time_s"] = f"{self._world.time:.3f}"
+        if self._world is not None or self._link is not None:
+            values["sim_time_s"] = f"{self.sim_time():.3f}"
             values["wheel_friction"] = " ".join(f"{mu:.3f}" for mu in self.friction)
+        if self._link is not None:
+            values["physics_process"] = (f"pid {self._link.pid}, "
+                                         f"{self._link.info['scheduling']}, "
+                                         f"{self._link.lost_periods} periods lost")
         return values
 
 

@@ -158,6 +158,10 @@ class SimDrivesDriver(Driver):
         from holonomic_sim.sim_driver import SimDriver
 
         super().__init__(model, params, control_rate)
+        if params["sim.physics_process"]:
+            raise ConfigError("sim.physics_process", True,
+                              "false with simulated drives (their physics runs in a thread "
+                              "of its own on the wall clock already)")
         self.channel = f"sim-drives-{os.getpid()}-{next(_channels)}"
         own = dict(params)
         own[f"{self.name}.interface"] = "virtual"

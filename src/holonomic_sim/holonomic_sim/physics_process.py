@@ -1,0 +1,470 @@
+"""The simulator's physics in a process of its own (``sim.physics_process``).
+
+On a real robot the plant is not in the control loop's process: the loop
+writes setpoints to the drives and reads their latest feedback, and a slow
+loop delays neither the motors nor the floor. With the physics stepped
+inside :meth:`SimDriver.read <holonomic_sim.sim_driver.SimDriver.read>`
+(the default), a pybullet step with the drive model runs inside the loop's
+cycle (XR4000 at 1 kHz: 23-27 % of a core, docs/realtime.md) and a late
+step makes a late cycle. Here it runs apart:
+
+* the **physics process** (``python -m holonomic_sim.physics_process``,
+  :func:`serve`) owns an ordinary in-process :class:`SimDriver` (its own
+  pybullet world, the drive model, the spreads, the encoder zeros, the
+  tip-over check) and steps it on the wall clock, one control period of
+  physics every control period: it applies the latest command, advances
+  ``physics_rate / control_rate`` physics steps, then writes the state;
+  after a late wake-up it catches up at most :data:`MAX_CATCH_UP` periods
+  and skips the rest (sim time then falls behind the wall clock rather than
+  jumping);
+* the **loop's** :class:`PhysicsLink` (inside the loop's SimDriver) writes
+  commands and takes the latest state without ever waiting for the physics:
+  a late or slow physics step delays the plant, not the loop.
+
+Channels (the reasoning of :mod:`holonomic_bringup.loop_wire`: a pipe write
+is one system call, a full memory barrier on every CPU, atomic under
+PIPE_BUF; no seqlock'd shared memory, which needs explicit barriers on ARM):
+
+* commands, loop -> physics: a pipe of fixed records ``(mode, value_1..n)``
+  (:data:`HOLD`, :data:`VELOCITY` [rad/s], :data:`EFFORT` [N m]); the
+  physics drains it at the start of each period and the latest record wins
+  (each record is the whole command, so none is lost by skipping older ones);
+* state, physics -> loop: a pipe of fixed records (:class:`StateLayout`:
+  sim time, joint positions / velocities / efforts as the drives report
+  them, ground truth, a fault flag); the loop drains it each cycle and keeps
+  the last, and re-uses it when none is new (the reading's stamp then does
+  not advance: the controller's reading monitor tolerates that up to
+  ``safety.reading_timeout``);
+* control, both ways: a ``SOCK_SEQPACKET`` socket of pickled messages (the
+  set-up, ``ready`` with what configure learnt, fault texts, wheel-contact
+  requests and replies).
+
+Lifetime: the physics process exits when either channel from the loop
+reaches end-of-file, i.e. when the loop closes the driver or its process
+dies (the kernel closes a dead process's descriptors), and on SIGTERM; a
+Linux parent-death signal backs that up. When the physics process dies, the
+loop's next read raises :class:`~holonomic_core.driver.DriverCommunicationError`
+naming it and its exit status: the controller faults and disarms (there are
+no motors left to move).
+
+Scheduling (:func:`plant_priority`): when the loop runs real-time (its own
+process, ``loop.realtime``), the physics process asks for SCHED_FIFO one
+step below the loop (``loop.priority - 1``), otherwise it stays SCHED_OTHER
+like the loop. Below: it never preempts the loop. Real-time at all: a plant
+starved by the ROS node, DDS or other load stops the readings, and the
+controller faults after ``safety.reading_timeout`` (50 ms) as it would on a
+silent drive -- measured on the loaded 2-core machine at SCHED_OTHER. It
+costs 13-27 % of a core (XR4000, 1 kHz, measured), so the node and DDS keep
+the rest and the real-time budget (95 % of each second) is far off.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import select
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from holonomic_core.driver import DriverCommunicationError, GroundTruth, JointReading
+from holonomic_core.schema import ConfigError
+
+#: command modes: brakes on (disarmed), joint speeds [rad/s], joint torques [N m]
+HOLD, VELOCITY, EFFORT = 0.0, 1.0, 2.0
+#: control periods the physics catches up after a late wake-up; beyond, the
+#: time is lost (sim time falls behind the wall clock)
+MAX_CATCH_UP = 20
+#: how long [s] the loop waits for the physics process to build its world,
+#: to answer a wheel-contact request, and to exit once told to
+START_TIMEOUT = 60.0
+REQUEST_TIMEOUT = 1.0
+STOP_TIMEOUT = 5.0
+#: the largest control message [bytes]
+MAX_MESSAGE = 1 << 20
+#: the device name in driver errors
+DEVICE = "physics process"
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """Offsets in one state record (float64) for ``joints`` joints: flags
+    (1: the physics' read failed, the text is on the control socket), sim
+    time [s], periods lost so far, positions [rad], velocities [rad/s],
+    efforts [N m], ground-truth pose (x, y, yaw) [m, m, rad] in odom and
+    twist (vx, vy, wz) in base_link [m/s, m/s, rad/s]."""
+
+    joints: int
+
+    @property
+    def size(self) -> int:
+        return 3 + 3 * self.joints + 6
+
+    def positions(self) -> slice:
+        return slice(3, 3 + self.joints)
+
+    def velocities(self) -> slice:
+        return slice(3 + self.joints, 3 + 2 * self.joints)
+
+    def efforts(self) -> slice:
+        return slice(3 + 2 * self.joints, 3 + 3 * self.joints)
+
+    def truth_pose(self) -> slice:
+        return slice(3 + 3 * self.joints, 6 + 3 * self.joints)
+
+    def truth_twist(self) -> slice:
+        return slice(6 + 3 * self.joints, 9 + 3 * self.joints)
+
+
+_FLAGS, _STAMP, _LOST = 0, 1, 2
+
+
+def _read_newest(fd: int, size: int) -> bytes | None:
+    """The newest ``size``-byte record waiting in non-blocking pipe ``fd``
+    (every one before it is read and dropped: the latest wins); None when
+    none is waiting, b"" at end-of-file. Each record was one write under
+    PIPE_BUF (atomic), so reads of a multiple of ``size`` return whole
+    records."""
+    newest = None
+    while True:
+        try:
+            data = os.read(fd, 64 * size)
+        except BlockingIOError:
+            return newest
+        if not data:
+            return newest if newest is not None else b""
+        newest = data[-size:]
+
+
+def _send(sock: socket.socket, message) -> bool:
+    try:
+        sock.send(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
+        return True
+    except OSError:
+        return False
+
+
+class PhysicsLink:
+    """The loop's end: starts the physics process for a SimDriver's
+    ``model`` and validated ``params`` (``sim.physics_process`` set false
+    for the inner driver) at ``control_rate`` [Hz], then carries commands
+    and the latest state. Not thread-safe: the loop's thread only (as the
+    driver)."""
+
+    def __init__(self, model, params, control_rate: float):
+        self.layout = StateLayout(len(model.joint_names))
+        self._record = np.zeros(self.layout.size)
+        self._command = np.zeros(1 + len(model.joint_names))
+        self._fault_text = "the simulated base failed"
+        self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        cmd_r, self._cmd_w = os.pipe()
+        self._state_r, state_w = os.pipe()
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "holonomic_sim.physics_process",
+                 str(theirs.fileno()), str(cmd_r), str(state_w)],
+                pass_fds=(theirs.fileno(), cmd_r, state_w))
+        finally:
+            theirs.close()
+            os.close(cmd_r)
+            os.close(state_w)
+        os.set_blocking(self._cmd_w, False)
+        os.set_blocking(self._state_r, False)
+        # the model as its flat keys (it holds modules: not picklable); the
+        # physics process builds it again, as SimDriver does for its body
+        _send(self._sock, (dict(model.params), dict(params), float(control_rate)))
+        #: what the physics' driver learnt configuring (hidden_truth, friction, ...)
+        self.info = self._await_ready()
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def _await_ready(self) -> dict:
+        deadline = time.monotonic() + START_TIMEOUT
+        message = self._receive(deadline)
+        if message is not None and message[0] == "config_error":
+            self.close()
+            raise ConfigError(*message[1])
+        if message is None or message[0] != "ready":
+            text = message[1] if message is not None and message[0] == "error" else (
+                f"did not start{self._exit_text(STOP_TIMEOUT)}")
+            self.close()
+            raise DriverCommunicationError(text, DEVICE)
+        # the first state: written right after "ready"
+        while not self._drain():
+            if not select.select([self._state_r], [], [], max(0.0, deadline - time.monotonic()))[0]:
+                self.close()
+                raise DriverCommunicationError("sent no state", DEVICE)
+        return message[1]
+
+    def _receive(self, deadline: float):
+        """The next control message (None at end-of-file or the deadline);
+        fault texts are kept, not returned."""
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0.0 or not select.select([self._sock], [], [], left)[0]:
+                return None
+            data = self._sock.recv(MAX_MESSAGE)
+            if not data:
+                return None
+            message = pickle.loads(data)
+            if message[0] == "fault":
+                self._fault_text = message[1]
+            else:
+                return message
+
+    def _exit_text(self, wait: float) -> str:
+        try:
+            code = self.proc.wait(wait)
+        except subprocess.TimeoutExpired:
+            return ""
+        if code < 0:
+            return f" (pid {self.proc.pid} killed by {signal.Signals(-code).name})"
+        return f" (pid {self.proc.pid} exited with code {code})"
+
+    def _drain(self) -> bool:
+        """Take the newest state record; False when none was waiting.
+        Raises DriverCommunicationError when the physics process is gone."""
+        data = _read_newest(self._state_r, self._record.nbytes)
+        if data is None:
+            return False
+        if not data:
+            raise DriverCommunicationError(
+                f"the simulator's physics process ended{self._exit_text(0.2)}", DEVICE)
+        self._record[:] = np.frombuffer(data, dtype=np.float64)
+        return True
+
+    def latest(self) -> JointReading:
+        """The newest state as a reading (stamp: sim time [s]); the last one
+        again when the physics has not stepped since."""
+        self._drain()
+        r, lay = self._record, self.layout
+        if r[_FLAGS]:
+            while True:          # the fault text was sent before the record
+                try:
+                    data = self._sock.recv(MAX_MESSAGE, socket.MSG_DONTWAIT)
+                except BlockingIOError:
+                    break
+                message = pickle.loads(data) if data else None
+                if message is None:
+                    break
+                if message[0] == "fault":
+                    self._fault_text = message[1]
+            raise DriverCommunicationError(self._fault_text, "pybullet")
+        return JointReading(float(r[_STAMP]), r[lay.positions()].copy(),
+                            r[lay.velocities()].copy(), r[lay.efforts()].copy())
+
+    @property
+    def sim_time(self) -> float:
+        """Sim time [s] of the newest state read."""
+        return float(self._record[_STAMP])
+
+    @property
+    def lost_periods(self) -> int:
+        """Control periods the physics skipped so far (it could not keep up)."""
+        return int(self._record[_LOST])
+
+    def ground_truth(self) -> GroundTruth:
+        """Ground truth at the newest state read (the same instant as the
+        reading, as in the in-process world)."""
+        r, lay = self._record, self.layout
+        return GroundTruth(float(r[_STAMP]), r[lay.truth_pose()].copy(),
+                           r[lay.truth_twist()].copy())
+
+    def command(self, mode: float, values=None) -> None:
+        """Send a command: HOLD, or VELOCITY / EFFORT with one value per
+        joint. A full pipe (the physics stalled) drops it: the next one
+        carries the whole command again. A dead physics process is reported
+        by the next read, not here (deactivate must not fail)."""
+        c = self._command
+        c[0] = mode
+        c[1:] = 0.0 if values is None else values
+        try:
+            os.write(self._cmd_w, c.data)
+        except (BlockingIOError, BrokenPipeError):
+            pass
+
+    def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The physics' wheel contacts (see SimDriver.wheel_contacts); a round
+        trip of up to one control period, not for the cycle; None when the
+        physics does not answer within REQUEST_TIMEOUT."""
+        if not _send(self._sock, ("contacts",)):
+            return None
+        message = self._receive(time.monotonic() + REQUEST_TIMEOUT)
+        return message[1] if message is not None and message[0] == "contacts" else None
+
+    def close(self) -> None:
+        """End the physics process (end-of-file on both its inputs), wait for
+        it, kill it if it does not go."""
+        for close in (self._sock.close, lambda: os.close(self._cmd_w)):
+            try:
+                close()
+            except OSError:
+                pass
+        try:
+            self.proc.wait(STOP_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        try:
+            os.close(self._state_r)
+        except OSError:
+            pass
+
+
+# -- the physics process ---------------------------------------------------------------
+def _die_with_parent() -> None:
+    """SIGTERM this process when the loop's process dies (Linux prctl): a
+    backup to the end-of-file on its channels."""
+    import ctypes
+    import ctypes.util
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        libc.prctl(1, signal.SIGTERM)        # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _write_state(driver, state_fd: int, record: np.ndarray, layout: StateLayout,
+                 reading, fault: bool) -> None:
+    record[_FLAGS] = 1.0 if fault else 0.0
+    record[_STAMP] = driver.sim_time()
+    if reading is not None:
+        record[layout.positions()] = reading.positions
+        record[layout.velocities()] = reading.velocities
+        record[layout.efforts()] = reading.efforts
+    truth = driver.ground_truth()
+    record[layout.truth_pose()] = truth.pose
+    record[layout.truth_twist()] = truth.twist
+    try:
+        os.write(state_fd, record.data)
+    except BlockingIOError:
+        pass            # the loop is not reading: it takes the newest when it does
+
+
+def plant_priority(params) -> int | None:
+    """The physics process's SCHED_FIFO priority for the validated
+    ``params``: one below the loop's when the loop runs real-time in its own
+    process; None (SCHED_OTHER) otherwise, or when the loop is at priority 1."""
+    if not (params.get("loop.realtime") and params.get("loop.process", True)):
+        return None
+    priority = int(params["loop.priority"]) - 1
+    return priority if priority >= 1 else None
+
+
+def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
+    """Build the SimDriver from the set-up message, answer ``ready``, then
+    step it on the wall clock until the loop goes. Returns the exit code
+    (0: the loop closed the channels; 2: the driver did not configure)."""
+    from holonomic_core.config import build_model
+    from holonomic_core.driver import DriverError
+    from holonomic_core.realtime import set_fifo
+    from holonomic_sim.sim_driver import SimDriver
+
+    flat, params, rate = pickle.loads(sock.recv(MAX_MESSAGE))
+    params["sim.physics_process"] = False
+    priority = plant_priority(params)
+    refused = None if priority is None else set_fifo(priority)
+    scheduling = ("SCHED_OTHER" if priority is None else f"SCHED_FIFO {priority}"
+                  if refused is None else f"SCHED_OTHER ({refused})")
+    model = build_model(flat)[0]
+    driver = SimDriver(model, params, rate)
+    try:
+        driver.configure()
+    except ConfigError as exc:      # the loop raises the same (bad sim.* values)
+        _send(sock, ("config_error", (exc.key, exc.value, exc.allowed)))
+        return 2
+    except DriverError as exc:
+        _send(sock, ("error", str(exc)))
+        return 2
+    _send(sock, ("ready", {"hidden_truth": driver.hidden_truth,
+                           "wheel_radii": driver.wheel_radii,
+                           "friction": driver.friction, "scheduling": scheduling}))
+    layout = StateLayout(len(model.joint_names))
+    record = np.zeros(layout.size)
+    width = 8 * (1 + layout.joints)
+    period = 1.0 / rate
+    last_fault = None
+    fault = False
+    reading = driver.read()
+    _write_state(driver, state_fd, record, layout, reading, False)
+    stepped_to = time.monotonic()
+    sock.setblocking(False)
+    try:
+        while True:
+            try:                           # requests; end-of-file: the loop is gone
+                data = sock.recv(MAX_MESSAGE)
+                if not data:
+                    return 0
+                if pickle.loads(data)[0] == "contacts":
+                    _send(sock, ("contacts", driver.wheel_contacts()))
+            except BlockingIOError:
+                pass
+            data = _read_newest(cmd_fd, width)
+            if data == b"":
+                return 0
+            if data is not None:
+                command = np.frombuffer(data, dtype=np.float64)
+                if command[0] == HOLD:
+                    driver.deactivate()
+                else:
+                    if not driver.armed:
+                        driver.activate()
+                    if command[0] == VELOCITY:
+                        driver.write_velocities(command[1:])
+                    else:
+                        driver.write_efforts(command[1:])
+            periods = int((time.monotonic() - stepped_to) / period)
+            if periods > MAX_CATCH_UP:
+                stepped_to += (periods - MAX_CATCH_UP) * period      # time lost
+                record[_LOST] += periods - MAX_CATCH_UP
+                periods = MAX_CATCH_UP
+            for _ in range(periods):
+                try:
+                    reading = driver.read()
+                    fault = False
+                except DriverError as exc:          # e.g. tipped over: the world steps on
+                    fault = True
+                    if str(exc) != last_fault:
+                        last_fault = str(exc)
+                        _send(sock, ("fault", last_fault))
+            if periods:
+                stepped_to += periods * period
+                _write_state(driver, state_fd, record, layout, reading, fault)
+            delay = stepped_to + period - time.monotonic()
+            if delay > 0.0:
+                time.sleep(delay)
+    finally:
+        driver.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    parent = os.getppid()
+    # a terminal's SIGINT is the node's to handle: it stops the loop, which
+    # closes this process's channels
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+    _die_with_parent()
+    if os.getppid() != parent:       # the loop died before prctl
+        return 0
+    try:
+        # whatever the spawning thread had; serve() decides (plant_priority)
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass
+    sock = socket.socket(fileno=int(argv[0]))
+    cmd_fd, state_fd = int(argv[1]), int(argv[2])
+    os.set_blocking(cmd_fd, False)
+    os.set_blocking(state_fd, False)
+    return serve(sock, cmd_fd, state_fd)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
