@@ -79,6 +79,9 @@ LOOP_1KHZ_CASES = (
     ("xr4000_torque", ["xr4000", "--driver", "sim", "-p", "control_mode:=torque",
                        "-p", "sim.physics_rate:=1000.0"],
      "xr4000, torque mode, simulator (1 kHz physics in the loop process)"),
+    ("xr4000_torque_pp", ["xr4000", "--driver", "sim", "-p", "control_mode:=torque",
+                          "-p", "sim.physics_rate:=1000.0", "-p", "sim.physics_process:=true"],
+     "xr4000, torque mode, simulator (physics in its own process, sim.physics_process)"),
 )
 
 
