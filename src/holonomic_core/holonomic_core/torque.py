@@ -157,6 +157,6 @@ class OperationalSpaceController:
         """Pull the reference to within MAX_ERROR of the measured pose."""
         if all(abs(e) <= m for e, m in zip(e_pose, MAX_ERROR)):
             return
-        clipped = np.clip(e_pose, -np.array(MAX_ERROR), MAX_ERROR)
-        # ref = pose - R(theta) e (position), theta - e_theta (heading)
-        self.ref_pose = compose(pose, -clipped)
+        # ref = pose - R(theta) e (position), theta - e_theta (heading), e
+        # clipped to MAX_ERROR
+        self.ref_pose = compose(pose, [-min(max(e, -m), m) for e, m in zip(e_pose, MAX_ERROR)])
