@@ -37,6 +37,8 @@ def torque_distribution(kin, positions: np.ndarray, force: np.ndarray) -> np.nda
     # scalar arithmetic on floats: for a handful of casters this costs a
     # fraction of the same work as numpy calls on length-n arrays
     cs = [(math.cos(phi), math.sin(phi)) for phi in positions[0::2]]
+    if len(positions) != 2 * n:
+        raise ValueError(f"expected {2 * n} joint positions, got {len(positions)}")
     px = [sx - b * c for (sx, _, b, _), (c, _) in zip(geometry, cs)]
     py = [sy - b * s for (_, sy, b, _), (_, s) in zip(geometry, cs)]
     cx, cy = sum(px) / n, sum(py) / n

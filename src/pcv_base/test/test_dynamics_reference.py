@@ -144,3 +144,13 @@ def test_torque_law_matches_the_numpy_reference(robot):
     # (a 200-cycle hold at 1.5 m/s is 0.3 m at 1 kHz, 1.5 m at 200 Hz)
     e_pose, _ = law.errors(pose, twist)
     assert abs(e_pose[0]) == pytest.approx(0.15, abs=1e-3)
+
+
+def test_torque_distribution_refuses_a_reading_of_the_wrong_length(dynamics):
+    """As the numpy form did (a broadcasting error): no torques computed for
+    casters the reading does not describe."""
+    n = len(dynamics.kin.casters)
+    with pytest.raises(ValueError):
+        torque_distribution(dynamics.kin, np.zeros(2 * n - 2), (10.0, 0.0, 0.0))
+    with pytest.raises(ValueError):
+        torque_distribution(dynamics.kin, np.zeros(2 * n + 2), (10.0, 0.0, 0.0))
