@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from holonomic_core import plugins
-from holonomic_core.se2 import compose, integrate_arc, relative_pose, rotate
+from holonomic_core.se2 import compose, integrate_arc, rotate, wrap_angle
 from holonomic_core.schema import ConfigError
 
 #: largest position / heading error the reference may run ahead [m, rad]
@@ -59,6 +59,9 @@ class OperationalSpaceController:
         self.dynamics = dynamics if dynamics is not None else dynamics_for(model)
         self.kp = np.asarray(kp, float)
         self.kv = np.asarray(kv, float)
+        # per-axis gains as floats for the cycle (a scalar gain applies to all axes)
+        self._kp = tuple(np.broadcast_to(self.kp, 3).tolist())
+        self._kv = tuple(np.broadcast_to(self.kv, 3).tolist())
         self.max_efforts = np.asarray(max_efforts, float)
         if distribution not in ("slip_min", "pinv"):
             raise ValueError(f"distribution must be 'slip_min' or 'pinv', got {distribution!r}")
@@ -76,12 +79,23 @@ class OperationalSpaceController:
     def errors(self, pose, twist) -> tuple[np.ndarray, np.ndarray]:
         """(pose error, twist error) of the base against the reference, in
         base_link [m, m, rad] and [m/s, m/s, rad/s]."""
-        # the base's offset from the reference, along the base's own axes
-        e_pose = -relative_pose(pose, self.ref_pose)
+        e_pose, e_twist = self._errors(pose, twist)
+        return np.array(e_pose), np.array(e_twist)
+
+    def _errors(self, pose, twist) -> tuple[tuple, tuple]:
+        """:meth:`errors` as tuples of floats (the cycle works on scalars: a
+        numpy call on a 3-vector costs microseconds, the arithmetic nanoseconds)."""
+        px, py, pth = (float(v) for v in pose)
+        rx, ry, rth = self.ref_pose.tolist()
+        # the base's offset from the reference, along the base's own axes:
+        # -relative_pose(pose, ref_pose)
+        dx, dy = rotate(rx - px, ry - py, -pth)
+        e_pose = (-dx, -dy, -wrap_angle(rth - pth))
         # the reference twist, turned into the actual base frame
-        rx, ry = rotate(self.ref_twist[0], self.ref_twist[1], self.ref_pose[2] - pose[2])
-        ref = np.array([rx, ry, self.ref_twist[2]])
-        return e_pose, np.asarray(twist, float) - ref
+        vx, vy, wz = self.ref_twist.tolist()
+        tx, ty = rotate(vx, vy, rth - pth)
+        x_dot = tuple(float(v) for v in twist)
+        return e_pose, (x_dot[0] - tx, x_dot[1] - ty, x_dot[2] - wz)
 
     def step(self, positions, pose, twist, reference_twist, dt: float,
              reference_acceleration=None) -> np.ndarray:
@@ -92,16 +106,17 @@ class OperationalSpaceController:
         commanded body twist; ``reference_acceleration``: its body-frame
         derivative if known (a trajectory), else taken from the twist's change.
         """
-        ref_twist = np.asarray(reference_twist, float)
+        ref = tuple(float(v) for v in reference_twist)
+        prev = self.ref_twist.tolist()
         if reference_acceleration is None:
-            accel = (ref_twist - self.ref_twist) / dt
+            accel = tuple((r - p) / dt for r, p in zip(ref, prev))
         else:
-            accel = np.asarray(reference_acceleration, float)
+            accel = tuple(float(v) for v in reference_acceleration)
         # advance the reference pose by the reference twist over the cycle
-        mid = 0.5 * (ref_twist + self.ref_twist)
-        self.ref_pose = np.array(integrate_arc(self.ref_pose, mid[0] * dt, mid[1] * dt,
+        mid = [0.5 * (r + p) for r, p in zip(ref, prev)]
+        self.ref_pose = np.array(integrate_arc(self.ref_pose.tolist(), mid[0] * dt, mid[1] * dt,
                                                mid[2] * dt))
-        self.ref_twist = ref_twist
+        self.ref_twist = np.array(ref)
         return self._torques(positions, pose, twist, accel)
 
     def track(self, positions, pose, twist, ref_pose, ref_twist, ref_acceleration) -> np.ndarray:
@@ -110,15 +125,18 @@ class OperationalSpaceController:
         precise move), instead of integrated from commands."""
         self.ref_pose = np.array(ref_pose, dtype=float)
         self.ref_twist = np.array(ref_twist, dtype=float)
-        return self._torques(positions, pose, twist, np.asarray(ref_acceleration, float))
+        return self._torques(positions, pose, twist,
+                             tuple(float(v) for v in ref_acceleration))
 
     def _torques(self, positions, pose, twist, accel) -> np.ndarray:
-        e_pose, e_twist = self.errors(pose, twist)
+        e_pose, e_twist = self._errors(pose, twist)
         self._limit_reference(pose, e_pose)
-        e_pose = np.clip(e_pose, -np.array(MAX_ERROR), MAX_ERROR)
-        f_star = -self.kp * e_pose - self.kv * e_twist + accel
+        # F* = -Kp (x - x_d) - Kv (x_dot - x_dot_d) + x_ddot_d (eq. 6), the
+        # position error clipped to MAX_ERROR (NaN passes through min/max)
+        f_star = np.array([-kp * min(max(e, -m), m) - kv * et + a for kp, kv, e, m, et, a
+                           in zip(self._kp, self._kv, e_pose, MAX_ERROR, e_twist, accel)])
         lam, mu = self.dynamics.terms(positions, twist)
-        self.wrench = lam @ f_star + mu
+        self.wrench = lam @ f_star + mu                                      # eq. 5
         return self.distribute(positions, self.wrench)
 
     def distribute(self, positions, wrench) -> np.ndarray:
@@ -129,6 +147,7 @@ class OperationalSpaceController:
         else:
             kin = self.model.kinematics
             torques = np.linalg.pinv(kin.constraint_matrix(positions)).T @ wrench
+        # numpy's max, not Python's: a NaN anywhere makes it NaN (zero torques)
         worst = float(np.max(np.abs(torques) / self.max_efforts))
         if not math.isfinite(worst):
             return np.zeros_like(torques)
@@ -138,6 +157,6 @@ class OperationalSpaceController:
         """Pull the reference to within MAX_ERROR of the measured pose."""
         if all(abs(e) <= m for e, m in zip(e_pose, MAX_ERROR)):
             return
-        clipped = np.clip(e_pose, -np.array(MAX_ERROR), MAX_ERROR)
-        # ref = pose - R(theta) e (position), theta - e_theta (heading)
-        self.ref_pose = compose(pose, -clipped)
+        # ref = pose - R(theta) e (position), theta - e_theta (heading), e
+        # clipped to MAX_ERROR
+        self.ref_pose = compose(pose, [-min(max(e, -m), m) for e, m in zip(e_pose, MAX_ERROR)])

@@ -81,27 +81,35 @@ class BodyParams:
 
 
 class PcvDynamics:
-    """Lambda(q) and mu(q, x_dot) of one PCV (``kin``: PoweredCasterKinematics)."""
+    """Lambda(q) and mu(q, x_dot) of one PCV (``kin``: PoweredCasterKinematics).
+
+    The terms run once per torque-mode cycle (1 kHz on the XR4000), on 3-vectors
+    and 3x3 matrices: they are written as scalar arithmetic on Python floats,
+    which costs a fraction of the same work as numpy calls on arrays that
+    small (numpy's per-call overhead is a few microseconds whatever the size).
+    """
 
     def __init__(self, kin, body: BodyParams):
         self.kin = kin
         self.body = body
-        n = len(kin.casters)
-        # M_b per body row block: fork (m, m, I), wheel (m, m, I_yaw, I_spin)
-        self._fork_m = np.array([body.fork_mass, body.fork_mass, body.fork_inertia])
-        self._wheel_m = np.array([body.wheel_mass, body.wheel_mass, body.wheel_inertia_yaw,
-                                  body.wheel_inertia_spin])
-        self._chassis = np.diag([body.chassis_mass, body.chassis_mass, body.chassis_inertia])
-        self._n = n
+        # M_b per body row: fork (m, m, I), wheel (m, m, I_yaw, I_spin)
+        self._fork_m = (body.fork_mass, body.fork_mass, body.fork_inertia)
+        self._wheel_m = (body.wheel_mass, body.wheel_mass, body.wheel_inertia_yaw,
+                         body.wheel_inertia_spin)
+        #: per caster (sx, sy [m], b, r [m], h [m], cos beta, sin beta) as floats
+        self._geometry = tuple((float(c.axis[0]), float(c.axis[1]), float(c.caster_offset),
+                                float(c.wheel_radius), float(c.h), math.cos(c.beta),
+                                math.sin(c.beta)) for c in kin.casters)
 
     @classmethod
     def from_model(cls, model) -> "PcvDynamics":
         return cls(model.kinematics, BodyParams.from_model(model))
 
     # -- body Jacobians --------------------------------------------------------------
-    def _caster_jacobians(self, i: int, phi: float):
-        """(J_fork 3x3, J_wheel 4x3, dJ_fork/dphi, dJ_wheel/dphi): body
-        velocities per unit base twist, and their derivatives.
+    def _caster_rows(self, i: int, phi: float):
+        """(J_fork, J_wheel, dJ_fork/dphi, dJ_wheel/dphi) of caster ``i`` at
+        steering angle ``phi`` [rad], as tuples of rows (3-tuples of floats):
+        body velocities per unit base twist, and their derivatives.
 
         Rows: fork centre (vx, vy) and yaw rate; wheel centre (vx, vy), yaw
         rate and spin rate rho_dot (all in base_link components). With
@@ -113,59 +121,85 @@ class PcvDynamics:
         dR = (-s/r, c/r, h (cb c + sb s)/r), dn = (-c, -s), d(px, py) =
         arm (s, -c).
         """
-        cas = self.kin.casters[i]
-        sx, sy = cas.axis
-        b, r, h = cas.caster_offset, cas.wheel_radius, cas.h
-        cb, sb = math.cos(cas.beta), math.sin(cas.beta)
+        sx, sy, b, r, h, cb, sb = self._geometry[i]
         c, s = math.cos(phi), math.sin(phi)
         # steering and rolling rows of the constraint matrix (eq. 7 / G rows 1-2)
-        steer = np.array([-s / b, c / b, h * (cb * c + sb * s) / b - 1.0])
-        roll = np.array([c / r, s / r, h * (cb * s - sb * c) / r])
-        d_steer = np.array([-c / b, -s / b, h * (sb * c - cb * s) / b])
-        d_roll = np.array([-s / r, c / r, h * (cb * c + sb * s) / r])
-        n_vec, d_n = np.array([-s, c]), np.array([-c, -s])
+        s0, s1, s2 = steer = (-s / b, c / b, h * (cb * c + sb * s) / b - 1.0)
+        roll = (c / r, s / r, h * (cb * s - sb * c) / r)
+        d0, d1, d2 = d_steer = (-c / b, -s / b, h * (sb * c - cb * s) / b)
+        d_roll = (-s / r, c / r, h * (cb * c + sb * s) / r)
 
         def point(arm):
             # base velocity at the point plus the fork's turn about the
-            # steering axis, which moves it by -arm phi_dot n
+            # steering axis, which moves it by -arm phi_dot n, n = (-s, c);
+            # the derivative: d[[1, 0, -py], [0, 1, px]] = [[0, 0, arm c],
+            # [0, 0, arm s]] minus arm (dn S + n dS), dn = (-c, -s)
             px, py = sx - arm * c, sy - arm * s
-            rows = np.array([[1.0, 0.0, -py], [0.0, 1.0, px]]) - arm * np.outer(n_vec, steer)
-            d_rows = (np.array([[0.0, 0.0, arm * c], [0.0, 0.0, arm * s]])
-                      - arm * (np.outer(d_n, steer) + np.outer(n_vec, d_steer)))
+            ac, as_ = arm * c, arm * s
+            rows = ((1.0 + as_ * s0, as_ * s1, -py + as_ * s2),
+                    (-ac * s0, 1.0 - ac * s1, px - ac * s2))
+            d_rows = ((ac * s0 + as_ * d0, ac * s1 + as_ * d1, ac + ac * s2 + as_ * d2),
+                      (as_ * s0 - ac * d0, as_ * s1 - ac * d1, as_ + as_ * s2 - ac * d2))
             return rows, d_rows
 
-        yaw = np.array([0.0, 0.0, 1.0]) + steer          # wz + phi_dot
+        yaw = (s0, s1, 1.0 + s2)                         # wz + phi_dot
         fork_xy, d_fork_xy = point(0.5 * b)
         wheel_xy, d_wheel_xy = point(b)
-        return (np.vstack([fork_xy, yaw]), np.vstack([wheel_xy, yaw, roll]),
-                np.vstack([d_fork_xy, d_steer]), np.vstack([d_wheel_xy, d_steer, d_roll]))
+        return (fork_xy + (yaw,), wheel_xy + (yaw, roll),
+                d_fork_xy + (d_steer,), d_wheel_xy + (d_steer, d_roll))
+
+    def _caster_jacobians(self, i: int, phi: float):
+        """:meth:`_caster_rows` as arrays (J_fork 3x3, J_wheel 4x3, dJ_fork/dphi,
+        dJ_wheel/dphi)."""
+        return tuple(np.array(rows) for rows in self._caster_rows(i, phi))
 
     # -- the operational-space terms ----------------------------------------------------
     def terms(self, positions, twist=None) -> tuple[np.ndarray, np.ndarray]:
         """(Lambda (3 x 3) [kg, kg m, kg m^2], mu (3,) [N, N, N m]) at the joint
         ``positions`` and base ``twist`` (mu = 0 without a twist), from one
-        pass over the casters' body Jacobians."""
-        steer = np.asarray(positions, float)[0::2]
-        lam = self._chassis.copy()
-        mu = np.zeros(3)
-        x_dot = None if twist is None else np.asarray(twist, float)
-        if x_dot is not None:
-            wz = x_dot[2]
+        pass over the casters' body Jacobians.
+
+        Per body row j (a 3-vector of J_b) with mass or inertia m:
+        ``Lambda += m j j^T`` and ``mu += m a j`` where ``a = phi_dot (dj . x_dot)``
+        (G_dot x_dot) plus, on the linear rows, the base frame's turn
+        ``wz k x v`` (``v = J_b x_dot``).
+        """
+        body = self.body
+        m_c, i_c = body.chassis_mass, body.chassis_inertia
+        l00, l01, l02, l11, l12, l22 = m_c, 0.0, 0.0, m_c, 0.0, i_c
+        mu0 = mu1 = mu2 = 0.0
+        moving = twist is not None
+        if moving:
+            vx, vy, wz = (float(v) for v in twist)
             # the chassis: its centre is base_link's origin
-            mu += self._chassis @ np.array([-wz * x_dot[1], wz * x_dot[0], 0.0])
-        for i, phi in enumerate(steer):
-            fork, wheel, d_fork, d_wheel = self._caster_jacobians(i, float(phi))
-            for J, dJ, masses in ((fork, d_fork, self._fork_m), (wheel, d_wheel, self._wheel_m)):
-                lam += J.T @ (masses[:, None] * J)
-                if x_dot is None:
-                    continue
-                v = J @ x_dot
-                phi_dot = v[2] - wz                      # the yaw row is wz + phi_dot
-                accel = (dJ * phi_dot) @ x_dot           # G_dot x_dot
-                accel[0] -= wz * v[1]                    # the base frame turns: wz k x v
-                accel[1] += wz * v[0]
-                mu += J.T @ (masses * accel)
-        return lam, mu
+            mu0, mu1 = m_c * (-wz * vy), m_c * (wz * vx)
+        fork_m, wheel_m = self._fork_m, self._wheel_m
+        for i, phi in enumerate(positions[0::2]):
+            fork, wheel, d_fork, d_wheel = self._caster_rows(i, float(phi))
+            for J, dJ, masses in ((fork, d_fork, fork_m), (wheel, d_wheel, wheel_m)):
+                if moving:
+                    # the body's velocity v = J x_dot, and phi_dot = S x_dot
+                    # (the yaw row is wz + phi_dot)
+                    v = [j0 * vx + j1 * vy + j2 * wz for j0, j1, j2 in J]
+                    phi_dot = v[2] - wz
+                    accel = [phi_dot * (d0 * vx + d1 * vy + d2 * wz) for d0, d1, d2 in dJ]
+                    accel[0] -= wz * v[1]                # the base frame turns: wz k x v
+                    accel[1] += wz * v[0]
+                else:
+                    accel = (0.0, 0.0, 0.0, 0.0)
+                for (j0, j1, j2), m, a in zip(J, masses, accel):
+                    w0, w1, w2 = m * j0, m * j1, m * j2
+                    l00 += w0 * j0
+                    l01 += w0 * j1
+                    l02 += w0 * j2
+                    l11 += w1 * j1
+                    l12 += w1 * j2
+                    l22 += w2 * j2
+                    mu0 += w0 * a
+                    mu1 += w1 * a
+                    mu2 += w2 * a
+        lam = np.array(((l00, l01, l02), (l01, l11, l12), (l02, l12, l22)))
+        return lam, np.array((mu0, mu1, mu2))
 
     def mass_matrix(self, positions) -> np.ndarray:
         """Lambda (3 x 3) [kg, kg m, kg m^2] at the joint ``positions``."""

@@ -9,6 +9,8 @@ distributes it here.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -30,15 +32,21 @@ def torque_distribution(kin, positions: np.ndarray, force: np.ndarray) -> np.nda
     steering torque b n_i . f_i, wheel torque r e_i . f_i.
     """
     fx, fy, tz = (float(v) for v in force)
-    phi = np.asarray(positions, float)[0::2]
-    c, s = np.cos(phi), np.sin(phi)
-    px, py = kin.sx - kin.b * c, kin.sy - kin.b * s
-    n = len(kin.casters)
-    cx, cy = px.mean(), py.mean()
-    qx, qy = px - cx, py - cy
-    nu = (tz - (cx * fy - cy * fx)) / float((qx * qx + qy * qy).sum())
-    f_x, f_y = fx / n - nu * qy, fy / n + nu * qx
-    out = np.empty(2 * n)
-    out[0::2] = kin.b * (-s * f_x + c * f_y)
-    out[1::2] = kin.r * (c * f_x + s * f_y)
-    return out
+    geometry = kin.contact_geometry                  # (sx, sy, b, r) per caster
+    n = len(geometry)
+    # scalar arithmetic on floats: for a handful of casters this costs a
+    # fraction of the same work as numpy calls on length-n arrays
+    cs = [(math.cos(phi), math.sin(phi)) for phi in positions[0::2]]
+    if len(positions) != 2 * n:
+        raise ValueError(f"expected {2 * n} joint positions, got {len(positions)}")
+    px = [sx - b * c for (sx, _, b, _), (c, _) in zip(geometry, cs)]
+    py = [sy - b * s for (_, sy, b, _), (_, s) in zip(geometry, cs)]
+    cx, cy = sum(px) / n, sum(py) / n
+    qx, qy = [x - cx for x in px], [y - cy for y in py]
+    nu = (tz - (cx * fy - cy * fx)) / sum(x * x + y * y for x, y in zip(qx, qy))
+    fx_n, fy_n = fx / n, fy / n
+    out = []
+    for (_, _, b, r), (c, s), x, y in zip(geometry, cs, qx, qy):
+        f_x, f_y = fx_n - nu * y, fy_n + nu * x
+        out += (b * (-s * f_x + c * f_y), r * (c * f_x + s * f_y))
+    return np.array(out)
