@@ -1,5 +1,6 @@
-"""The base controller on emulated ODrive and CiA 402 drives (python-can
-virtual bus, ROS-free): commands reach the wire as the exact inverse
+"""The base controller on emulated ODrive and CiA 402 drives (in a process
+of their own on a bus between processes, holonomic_testing.can_rig;
+ROS-free): commands reach the wire as the exact inverse
 kinematics, odometry comes from the reported encoders, and every kind of
 drive failure stops all motors within two control cycles, names the
 device, and blocks motion until the fault is gone and the base is re-armed.
@@ -208,7 +209,7 @@ def test_bad_frames_are_ignored_and_counted(rig_factory, backend):
     rig = rig_factory(backend, "hamr")
     assert rig.arm()[0]
     rig.run(0.3, [0.3, 0.0, 0.0])
-    script = can.Bus(interface="virtual", channel=rig.channel)
+    script = rig.open_bus()
     try:
         if backend == "odrive_can":
             bad = [(0x01, b"\x00\x00"),                          # node 0 heartbeat, 2 bytes
@@ -484,17 +485,25 @@ def test_emulated_cia402_drive_samples_a_late_sync_at_its_stamp(rig_factory):
     assert abs(v) > 1.0                        # turning [rad/s] at the motor
     device.tick(t1 + 0.1)                     # stepped 0.1 s on, then the SYNC of t1 + 0.05
     assert device.motor().position() == pytest.approx(p1 + 0.1 * v)
-    sender = can.Bus(interface="virtual", channel=rig.channel, preserve_timestamps=True)
+    sender = rig.open_bus(preserve_timestamps=True)
     try:
         mark = len(rig.sniff())
         sender.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False,
                                 timestamp=t1 + 0.05))
+        sender.barrier()                      # the SYNC is in the drives' queues
         device.poll(t1 + 0.1)
     finally:
         sender.shutdown()
-    # (frames the loop sent before the emulator stopped are answered too)
-    (tpdo,) = [m for m in rig.sniff()[mark:] if m.arbitration_id == 0x180 + node
-               and m.timestamp == pytest.approx(t1 + 0.05 + device.ANSWER_DELAY, abs=1e-6)]
+
+    def answers():
+        # (frames the loop sent before the emulator stopped are answered too)
+        return [m for m in rig.sniff()[mark:] if m.arbitration_id == 0x180 + node
+                and m.timestamp == pytest.approx(t1 + 0.05 + device.ANSWER_DELAY, abs=1e-6)]
+    # the drive's answer crosses from its process to the sniffer's
+    deadline = time.monotonic() + 5.0
+    while not answers() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    (tpdo,) = answers()
     counts, _ = struct.unpack("<ii", tpdo.data)
     expected = (p1 + 0.05 * v) / (2 * math.pi) * 16384
     assert counts == pytest.approx(expected, abs=1.0)

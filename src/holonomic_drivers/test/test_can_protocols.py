@@ -1,7 +1,7 @@
 """The CAN protocols byte for byte: ODrive CANSimple and CANopen CiA 402.
 
 Codecs against hand-assembled frames, then what the drivers really put on
-the bus (sniffed on a virtual channel) against scripted frame sequences.
+the bus (sniffed on the rig's bus) against scripted frame sequences.
 Little-endian IEEE 754: 1.0 = 0x3F800000, 0.5 = 0x3F000000, -2.5 = 0xC0200000,
 0.25 = 0x3E800000.
 """
@@ -133,7 +133,7 @@ def test_odrive_driver_decodes_scripted_encoder_frames():
     try:
         rig.driver.configure()
         rig.emulators.stop()          # from here on only the script talks
-        script = can.Bus(interface="virtual", channel=rig.channel)
+        script = rig.open_bus()
 
         def send(estimates):
             for node, (pos, vel) in enumerate(estimates):
@@ -141,6 +141,7 @@ def test_odrive_driver_decodes_scripted_encoder_frames():
                                         data=H("00000000 01 00 00 00")))
                 script.send(can.Message(arbitration_id=node << 5 | 0x09, is_extended_id=False,
                                         data=struct.pack("<ff", pos, vel)))
+            script.barrier()          # they are in the driver's receive buffer
 
         send([(1.0, 0.0), (1.0, 0.0), (10.0, 0.0)])
         reading = rig.driver.read()
