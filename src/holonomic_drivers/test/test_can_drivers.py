@@ -239,7 +239,12 @@ def test_shutdown_stops_and_disarms_every_drive(rig_factory, backend):
     t = time.time()
     rig.controller.shutdown()
     assert all(rig.stop_time(n, t) is not None for n in rig.node_ids)
-    time.sleep(0.3)
+    # then every motor stops: the emulated motors ramp down at 200 rev/s^2
+    # from < 1 rev/s, 5 ms; the drives run on a process of their own
+    deadline = time.monotonic() + 2.0
+    while (not all(d.velocity_rev_per_s == 0.0 for d in rig.devices)
+           and time.monotonic() < deadline):
+        time.sleep(0.01)
     assert all(d.velocity_rev_per_s == 0.0 for d in rig.devices)
 
 

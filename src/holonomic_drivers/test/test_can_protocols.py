@@ -92,7 +92,7 @@ def test_odrive_driver_sends_the_scripted_frames():
     config/hamr.yaml: nodes 0, 1 (direction -1), 2 (gear 10)."""
     rig = CanRig("odrive_can", "hamr")
     try:
-        rig.driver.configure()
+        rig.configure_driver()
         configure = _frames_to(rig.sniff(), {0, 1, 2})
         expected = []
         for n in (0, 1, 2):
@@ -131,7 +131,7 @@ def test_odrive_driver_decodes_scripted_encoder_frames():
     """Frames written by hand: positions in rev -> joint rad through the mapping."""
     rig = CanRig("odrive_can", "hamr")
     try:
-        rig.driver.configure()
+        rig.configure_driver()
         rig.emulators.stop()          # from here on only the script talks
         script = rig.open_bus()
 
@@ -263,7 +263,7 @@ def test_cia402_driver_sends_the_scripted_frames():
     nodes 1, 2 (direction -1), 3 (gear 10), 16384 counts/rev."""
     rig = CanRig("cia402", "hamr")
     try:
-        rig.driver.configure()
+        rig.configure_driver()
         frames = rig.sniff()
         nmt = [bytes(m.data) for m in frames if m.arbitration_id == 0]
         assert nmt == [H("80 01"), H("80 02"), H("80 03"), H("01 01"), H("01 02"), H("01 03")]

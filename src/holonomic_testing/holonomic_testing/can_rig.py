@@ -115,8 +115,14 @@ class CanRig:
         python-can's virtual bus, e.g. ``preserve_timestamps=True``)."""
         return IpcBus(channel=self.channel, **kwargs)
 
+    def configure_driver(self) -> None:
+        """The driver's configure, in a thread with the loop's scheduling:
+        the threads it starts (canopen's notifier, which handles every
+        answer of a CiA 402 drive) inherit it."""
+        self._with_loop_scheduling(self.driver.configure)
+
     def configure(self) -> "CanRig":
-        self.driver.configure()
+        self.configure_driver()
         self.controller = BaseController(self.config, self.driver)
         return self
 
@@ -140,8 +146,6 @@ class CanRig:
 
         def cycle() -> None:
             nonlocal count
-            if count == 0:
-                self._schedule_loop_thread()
             if count >= cycles:
                 done.set()
                 return
@@ -149,8 +153,9 @@ class CanRig:
                 self.controller.set_command(twist)
             self.step()
             self.odometry_twists.append(self.controller.odometry.twist.copy())
-            self.odometry_poses.append((self.controller.reading.stamp,
-                                        self.controller.odometry.pose.copy()))
+            if self.controller.reading is not None:       # None: no reading yet (a fault)
+                self.odometry_poses.append((self.controller.reading.stamp,
+                                            self.controller.odometry.pose.copy()))
             count += 1
 
         def on_error(exc: BaseException) -> bool:
@@ -159,7 +164,7 @@ class CanRig:
             return False
 
         loop = ControlLoop(self.controller.dt, cycle, on_error, name="can_rig_loop")
-        loop.start()
+        self._with_loop_scheduling(loop.start)          # its thread inherits it
         try:
             if not done.wait(10.0 * seconds + 10.0):
                 raise TimeoutError(f"{cycles} cycles did not run within {10 * seconds + 10:g} s")
@@ -168,15 +173,34 @@ class CanRig:
         if errors:
             raise errors[0]
 
-    def _schedule_loop_thread(self) -> None:
-        """The loop process's scheduling (loop_host.run_host), for this
-        thread only: the test process goes on with its own."""
-        tighten_timer_slack()
-        if self.realtime:
-            refused = set_fifo(DEFAULT_PRIORITY)
-            if refused is not None and self.realtime_refused is None:
-                self.realtime_refused = refused
-                print(f"can_rig: {refused}; the loop runs without", file=sys.stderr)
+    def _with_loop_scheduling(self, action):
+        """``action()`` in a short-lived thread given the loop process's
+        scheduling (loop_host.run_host: tight timer slack, SCHED_FIFO at the
+        default priority); the threads it starts inherit it, the test's own
+        threads keep theirs. Not mlockall: it would lock the whole pytest
+        session's memory for every later test (and a page fault is not what
+        starves a loaded machine's test, the CPU is)."""
+        outcome: list = []
+
+        def body() -> None:
+            tighten_timer_slack()
+            if self.realtime:
+                refused = set_fifo(DEFAULT_PRIORITY)
+                if refused is not None and self.realtime_refused is None:
+                    self.realtime_refused = refused
+                    print(f"can_rig: {refused}; the loop runs without", file=sys.stderr)
+            try:
+                outcome.append((True, action()))
+            except BaseException as exc:        # raised in the caller's thread
+                outcome.append((False, exc))
+
+        thread = threading.Thread(target=body, name="can_rig_scheduled")
+        thread.start()
+        thread.join()
+        ok, value = outcome[0]
+        if not ok:
+            raise value
+        return value
 
     def mean_odometry_twist(self, seconds: float) -> np.ndarray:
         """The constant body twist [m/s, m/s, rad/s] that takes the odometry

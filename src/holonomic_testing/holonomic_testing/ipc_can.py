@@ -253,6 +253,10 @@ class BusHub:
                 packet = client.recv(_MAX_PACKET)
             except BlockingIOError:
                 return
+            except ConnectionResetError:
+                # the client closed with frames of ours unread: Linux reports
+                # that once, before the frames it sent last (still queued)
+                continue
             except OSError:
                 packet = b""
             if not packet:
