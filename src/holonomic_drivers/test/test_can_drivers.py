@@ -241,11 +241,8 @@ def test_shutdown_stops_and_disarms_every_drive(rig_factory, backend):
     assert all(rig.stop_time(n, t) is not None for n in rig.node_ids)
     # then every motor stops: the emulated motors ramp down at 200 rev/s^2
     # from < 1 rev/s, 5 ms; the drives run on a process of their own
-    deadline = time.monotonic() + 2.0
-    while (not all(d.velocity_rev_per_s == 0.0 for d in rig.devices)
-           and time.monotonic() < deadline):
-        time.sleep(0.01)
-    assert all(d.velocity_rev_per_s == 0.0 for d in rig.devices)
+    rig.wait_for(lambda: all(d.velocity_rev_per_s == 0.0 for d in rig.devices), 2.0,
+                 "every motor at standstill")
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -505,9 +502,7 @@ def test_emulated_cia402_drive_samples_a_late_sync_at_its_stamp(rig_factory):
         return [m for m in rig.sniff()[mark:] if m.arbitration_id == 0x180 + node
                 and m.timestamp == pytest.approx(t1 + 0.05 + device.ANSWER_DELAY, abs=1e-6)]
     # the drive's answer crosses from its process to the sniffer's
-    deadline = time.monotonic() + 5.0
-    while not answers() and time.monotonic() < deadline:
-        time.sleep(0.01)
+    rig.wait_for(answers, 5.0, "the drive's answer to the SYNC")
     (tpdo,) = answers()
     counts, _ = struct.unpack("<ii", tpdo.data)
     expected = (p1 + 0.05 * v) / (2 * math.pi) * 16384

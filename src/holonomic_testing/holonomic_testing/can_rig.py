@@ -217,6 +217,17 @@ class CanRig:
                           if t <= t1 - seconds), self.odometry_poses[0])
         return arc_between(start, end) / (t1 - t0)
 
+    @staticmethod
+    def wait_for(predicate, timeout: float, what: str) -> None:
+        """Wait until ``predicate()`` is true, at most ``timeout`` [s] (then
+        AssertionError naming ``what``): for what crosses between the
+        processes (the drives' answers, their motors' state)."""
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+            time.sleep(0.01)
+
     def sniff(self) -> list[can.Message]:
         """Every frame on the bus so far (send time in ``timestamp``), at
         least all that the driver sent before the call."""
