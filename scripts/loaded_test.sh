@@ -19,8 +19,10 @@ VENV="${VENV:-.venv}"
 WS="${WS:-ros2_ws}"
 LOGS="${LOGS:-out/loaded}"
 mkdir -p "$LOGS"
+set +u                                   # the workspace's setup files read unset variables
 # shellcheck disable=SC1091
 . "$WS/env.sh"
+set -u
 python3 -c "while True: pass" & B1=$!
 python3 -c "while True: pass" & B2=$!
 trap 'kill $B1 $B2 2>/dev/null || true' EXIT
