@@ -67,15 +67,11 @@ def assert_free_motors_follow_torques(speeds, motor_torques, inertia, longest):
 
 
 def unhurried(backend: str) -> dict:
-    """Deadlines of a test about the mapping, not about deadlines (the
-    failure tests below check those): the emulated drives are threads of
-    this process, so when the OS starves the whole process (measured: the
-    loop's and the emulator's longest gaps 140-230 ms at load 3, 433 ms at
-    load 13, seconds at load 20; a 50 ms heartbeat then misses a 200 ms
-    timeout: 7 of 8 comr3 runs at load 3) they fall silent
-    with it, and the first check after the stall would count their silence
-    against them -- on a real bus the drives keep answering. 2 s is ~5x the
-    longest stall measured."""
+    """Deadlines for a test that plays or steps the drives itself from its
+    own thread (not real-time: on a loaded machine it stalls for hundreds
+    of ms, seconds at load 20), where the driver's watchdogs would count
+    the test's stalls against the drives. 2 s is ~5x the longest stall
+    measured at load 13 (433 ms)."""
     params = {f"{backend}.feedback_timeout": 2.0, f"{backend}.heartbeat_timeout": 2.0,
               "safety.reading_timeout": 2.0}
     if backend == "cia402":
@@ -86,14 +82,15 @@ def unhurried(backend: str) -> dict:
 @pytest.mark.parametrize("backend,robot", [
     ("odrive_can", "hamr"), ("cia402", "hamr"), ("odrive_can", "xr4000"), ("cia402", "comr3")])
 def test_cmd_reaches_the_wire_and_odometry_follows_the_encoders(rig_factory, backend, robot):
-    # About the mapping (IK on the wire, encoders -> odometry): unhurried
-    # deadlines. (comr3's six drives used to show a false "encoder glitch"
+    # About the mapping (IK on the wire, encoders -> odometry), with the
+    # product's deadlines: the drives run in a process of their own and the
+    # loop at real-time priority, as on a robot. (comr3's six drives used to show a false "encoder glitch"
     # about one run in three even on an idle machine: answers handled after
     # a stall longer than the driver's record of SYNCs were stamped with the
     # newest SYNC, and the emulated drives sampled a SYNC that reached them
     # late at their current position; both fixed, see cia402._answered_sync
     # and EmulatedCia402Drive._motor_at.)
-    rig = rig_factory(backend, robot, **unhurried(backend))
+    rig = rig_factory(backend, robot)
     assert rig.arm() == (True, "motors armed")
     twist = np.array([0.3, -0.2, 0.4])
     rig.run(1.5, twist)
