@@ -8,6 +8,7 @@ Little-endian IEEE 754: 1.0 = 0x3F800000, 0.5 = 0x3F000000, -2.5 = 0xC0200000,
 
 import math
 import struct
+import time
 
 import can
 import pytest
@@ -321,3 +322,64 @@ def test_cia402_driver_sends_the_scripted_frames():
                             (0x203, H("07 00 00 00 00 00")), (0x080, b"")]
     finally:
         rig.close()
+
+
+# -- the rig's bus between processes ------------------------------------------------------------
+
+
+def test_the_rigs_bus_carries_frames_with_their_stamps():
+    """holonomic_ipc (the bus the CAN tests' drives are on): a frame reaches
+    every other node with its bytes and its send time, or with
+    preserve_timestamps the sender's own stamp (as the emulated drives stamp
+    their answers)."""
+    rig = CanRig("odrive_can", "hamr")
+    nodes = []
+    try:
+        rig.emulators.stop()
+        a, b = rig.open_bus(), rig.open_bus(preserve_timestamps=True)
+        nodes += [a, b]
+        b.send(can.Message(arbitration_id=0x7E1, data=b"\x01\x02", is_extended_id=False,
+                           timestamp=42.0))
+        t0 = time.time()
+        a.send(can.Message(arbitration_id=0x7E2, data=H("0f 00 00 40"), is_extended_id=False))
+        t1 = time.time()
+        # (frames of different senders in either order, as on a bus)
+        sent = {m.arbitration_id: (bytes(m.data), m.timestamp) for m in rig.sniff()
+                if m.arbitration_id in (0x7E1, 0x7E2)}
+        assert sent[0x7E1] == (b"\x01\x02", 42.0)
+        assert sent[0x7E2][0] == H("0f 00 00 40") and t0 <= sent[0x7E2][1] <= t1
+    finally:
+        for node in nodes:
+            node.shutdown()
+        rig.close()
+
+
+def test_the_rigs_bus_delivers_the_last_frames_of_a_node_that_closes(tmp_path):
+    """A node that closes with frames of others unread (the driver at
+    shutdown: the drives kept talking) still delivers every frame it sent
+    before closing (its stop frames). Linux first reports ECONNRESET to the
+    hub there; the hub used to drop the node at that point, frames and all.
+    The hub is served by hand: the node sends and closes before the hub
+    reads anything."""
+    from holonomic_testing.ipc_can import BusHub, IpcBus
+    path = str(tmp_path / "bus")
+    hub = BusHub(path, f"hub-test-{id(tmp_path)}")
+    closing, listener = IpcBus(path), IpcBus(path)
+    try:
+        hub.serve_once(1.0)                          # both connect
+        listener.send(can.Message(arbitration_id=0x7E3, is_extended_id=False))
+        hub.serve_once(1.0)                          # ... now unread by the closing node
+        for k in range(3):
+            closing.send(can.Message(arbitration_id=0x7E4, data=bytes([k]),
+                                     is_extended_id=False))
+        closing.shutdown()
+        got = []
+        for _ in range(5):
+            hub.serve_once(0.1)
+            while (msg := listener.recv(timeout=0.0)) is not None:
+                got.append(bytes(msg.data))
+        assert got == [b"\x00", b"\x01", b"\x02"]
+    finally:
+        closing.shutdown()
+        listener.shutdown()
+        hub.stop()

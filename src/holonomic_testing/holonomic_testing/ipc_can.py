@@ -180,7 +180,8 @@ class BusHub:
         self._stop.set()
         self._wake()
         for thread in self._threads:
-            thread.join(timeout=2.0)
+            if thread.is_alive():
+                thread.join(timeout=2.0)
         for client in list(self._clients):
             client.close()
         self._listener.close()
@@ -208,36 +209,42 @@ class BusHub:
 
     def _serve(self) -> None:
         while not self._stop.is_set():
-            with self._lock:
-                clients = list(self._clients)
-                waiting = [c for c in clients if self._clients[c]]
-            readable, writable, _ = select.select([self._listener, self._wake_r, *clients],
-                                                  waiting, [], 0.5)
-            for sock in readable:
-                if sock is self._listener:
-                    self._accept()
-                elif sock == self._wake_r:
-                    while True:
-                        try:
-                            if not os.read(self._wake_r, 4096):
-                                break
-                        except BlockingIOError:
+            self.serve_once(0.5)
+
+    def serve_once(self, timeout: float) -> None:
+        """One round of the hub's thread (by hand when not started): wait up
+        to ``timeout`` [s] for a connection or a frame, forward what came."""
+        with self._lock:
+            clients = list(self._clients)
+            waiting = [c for c in clients if self._clients[c]]
+        readable, _, _ = select.select([self._listener, self._wake_r, *clients], waiting, [],
+                                       timeout)
+        for sock in readable:
+            if sock is self._listener:
+                self._accept()
+            elif sock == self._wake_r:
+                while True:
+                    try:
+                        if not os.read(self._wake_r, 4096):
                             break
-                else:
-                    self._read_from(sock, drain_others=True)
-            with self._lock:
-                clients = list(self._clients)
-            for sock in clients:
-                self._flush(sock)
+                    except BlockingIOError:
+                        break
+            else:
+                self._read_from(sock, drain_others=True)
+        with self._lock:
+            clients = list(self._clients)
+        for sock in clients:
+            self._flush(sock)
 
     def _accept(self) -> None:
-        try:
-            client, _ = self._listener.accept()
-        except BlockingIOError:
-            return
-        client.setblocking(False)
-        with self._lock:
-            self._clients[client] = collections.deque()
+        while True:
+            try:
+                client, _ = self._listener.accept()
+            except BlockingIOError:
+                return
+            client.setblocking(False)
+            with self._lock:
+                self._clients[client] = collections.deque()
 
     def _drop(self, client: socket.socket) -> None:
         with self._lock:
