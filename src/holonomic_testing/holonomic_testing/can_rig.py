@@ -105,8 +105,6 @@ class CanRig:
         self.frames: list[can.Message] = []
         self.controller = None
         self.cycle_starts: list[float] = []
-        #: the odometry's twist after each cycle of ``run``
-        self.odometry_twists: list[np.ndarray] = []
         #: (reading stamp [s], odometry pose [m, m, rad]) after each cycle of ``run``
         self.odometry_poses: list[tuple[float, np.ndarray]] = []
 
@@ -152,7 +150,6 @@ class CanRig:
             if twist is not None:
                 self.controller.set_command(twist)
             self.step()
-            self.odometry_twists.append(self.controller.odometry.twist.copy())
             if self.controller.reading is not None:       # None: no reading yet (a fault)
                 self.odometry_poses.append((self.controller.reading.stamp,
                                             self.controller.odometry.pose.copy()))
