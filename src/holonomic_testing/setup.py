@@ -22,5 +22,8 @@ setup(
         # domain: loaded by every pytest run in the workspace's environment,
         # `make test` over all packages and `colcon test` of one package alike
         "pytest11": ["holonomic_testing = holonomic_testing.pytest_plugin"],
+        # a CAN bus between processes (the rig's drives run in a process of
+        # their own): can.Bus(interface="holonomic_ipc", channel=hub socket)
+        "can.interface": ["holonomic_ipc = holonomic_testing.ipc_can:IpcBus"],
     },
 )

@@ -40,18 +40,21 @@ def yaw_of(q) -> float:
 @dataclass(frozen=True)
 class Sample:
     """Pose (x, y, yaw) [m, m, rad] in odom and body twist (vx, vy, wz) at
-    receive time ``t`` (time.monotonic, s)."""
+    receive time ``t`` (time.monotonic, s); ``stamp``: the message's header
+    stamp [s] (the time of the readings the estimate is from)."""
 
     t: float
     pose: np.ndarray
     twist: np.ndarray
+    stamp: float = float("nan")
 
 
 def _sample(msg: Odometry) -> Sample:
     p, tw = msg.pose.pose, msg.twist.twist
     return Sample(time.monotonic(),
                   np.array([p.position.x, p.position.y, yaw_of(p.orientation)]),
-                  np.array([tw.linear.x, tw.linear.y, tw.angular.z]))
+                  np.array([tw.linear.x, tw.linear.y, tw.angular.z]),
+                  msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
 
 
 class RobotClient:

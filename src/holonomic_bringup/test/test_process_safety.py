@@ -4,6 +4,7 @@ a flood of cmd_vel from another process."""
 
 import math
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -139,7 +140,17 @@ def test_a_10_khz_cmd_vel_flood_for_30_s_keeps_the_loop_rate_and_memory(ros, sta
                 rates.append(float(next(kv.value for kv in loop.values if kv.key == "rate_hz")))
             rss.append(_rss_kib(proc.proc.pid))
         # the latest command wins: after the flood, its final twist (sent
-        # for 3 s) is what the base does
+        # for 3 s) is what the base does. The flood ends 30 s after the
+        # publisher's own start-up, which takes seconds on a loaded machine
+        # (the final command was missed by a 4 s wait from the test's 30 s,
+        # 2026-11-26, two busy loops at load 11-16): wait for its word.
+        deadline, said = time.monotonic() + 60.0, []
+        while "final command" not in said:
+            wait_until(lambda: select.select([flood.stdout], [], [], 0.0)[0],
+                       deadline - time.monotonic(), "the end of the flood")
+            said.append(flood.stdout.readline())
+            assert said[-1], f"the flood publisher ended early: {said}"
+            said[-1] = said[-1].strip()
         wait_until(lambda: np.allclose(probe.latest_odom().twist, [0.3, -0.2, 0.5], atol=0.02),
                    4.0, "the final command to win")
         out, _ = flood.communicate(timeout=30)

@@ -9,6 +9,7 @@ the simulator's world). Angles returned are wrapped to [-pi, pi].
 * :func:`rotate`: a planar vector turned by an angle;
 * :func:`compose_arc` / :func:`integrate_arc`: the exact motion under a
   constant body twist (the odometry's and the torque reference's integration);
+  :func:`arc_between` the inverse (the constant twist that joins two poses);
 * :func:`yaw_of_quaternion` / :func:`quaternion_of_yaw`: to and from
   ``(x, y, z, w)`` quaternions (ROS messages, pybullet).
 """
@@ -59,6 +60,15 @@ def relative_poses(starts, ends) -> np.ndarray:
                             wrap_angles(d[:, 2])))
 
 
+def _arc_factors(dtheta: float) -> tuple[float, float]:
+    """sin(t)/t and (1 - cos t)/t at t = ``dtheta`` [rad]: a constant body
+    twist that turns by t moves the origin by [[a, -b], [b, a]] (dx, dy)."""
+    if abs(dtheta) < 1e-6:
+        # series of sin(t)/t and (1 - cos t)/t to 2nd order
+        return 1.0 - dtheta * dtheta / 6.0, 0.5 * dtheta
+    return math.sin(dtheta) / dtheta, (1.0 - math.cos(dtheta)) / dtheta
+
+
 def compose_arc(pose, dx: float, dy: float, dtheta: float) -> tuple[float, float]:
     """World-frame displacement [m] of a constant-twist arc.
 
@@ -66,13 +76,7 @@ def compose_arc(pose, dx: float, dy: float, dtheta: float) -> tuple[float, float
     constant body twist (the body-frame chord of an arc), starting at heading
     ``pose[2]``. Returns the displacement of the origin in the parent frame.
     """
-    if abs(dtheta) < 1e-6:
-        # series of sin(t)/t and (1 - cos t)/t to 2nd order
-        a = 1.0 - dtheta * dtheta / 6.0
-        b = 0.5 * dtheta
-    else:
-        a = math.sin(dtheta) / dtheta
-        b = (1.0 - math.cos(dtheta)) / dtheta
+    a, b = _arc_factors(dtheta)
     bx = a * dx - b * dy
     by = b * dx + a * dy
     return rotate(bx, by, pose[2])
@@ -83,6 +87,19 @@ def integrate_arc(pose, dx: float, dy: float, dtheta: float) -> tuple[float, flo
     ``(dx, dy, dtheta)`` (body frame, see :func:`compose_arc`)."""
     wx, wy = compose_arc(pose, dx, dy, dtheta)
     return pose[0] + wx, pose[1] + wy, wrap_angle(pose[2] + dtheta)
+
+
+def arc_between(start, end) -> np.ndarray:
+    """The inverse of :func:`integrate_arc`: the body-frame ``(dx, dy,
+    dtheta)`` [m, m, rad] whose constant-twist arc takes ``start`` to ``end``
+    (the SE(2) logarithm of ``start^-1 end``; divided by the time between
+    the two poses it is the mean body twist [m/s, m/s, rad/s] of the motion,
+    whatever the sampling in between). ``dtheta`` is the heading change
+    wrapped to [-pi, pi]."""
+    x, y, dtheta = relative_pose(start, end)
+    a, b = _arc_factors(dtheta)
+    det = a * a + b * b
+    return np.array([(a * x + b * y) / det, (a * y - b * x) / det, dtheta])
 
 
 def yaw_of_quaternion(q) -> float:

@@ -97,3 +97,20 @@ def test_yaw_of_a_quaternion_and_back():
     # a roll of 90 deg (about x) has no yaw: (sin 45, 0, 0, cos 45)
     assert se2.yaw_of_quaternion((math.sin(PI / 4), 0.0, 0.0, math.cos(PI / 4))) == \
         pytest.approx(0.0, abs=1e-12)
+
+
+def test_arc_between_inverts_the_constant_twist_arc():
+    # By hand: from (1, 2) heading +y (pi/2), a quarter circle of radius 1
+    # turning left (v = 1 m/s, w = 1 rad/s for pi/2 s) goes round the centre
+    # (1, 2) + 1 m to the left = (0, 2) and ends at (0, 3) heading -x (pi):
+    # the arc is (pi/2 m along the body's x, 0, pi/2 rad).
+    assert se2.arc_between((1.0, 2.0, math.pi / 2), (0.0, 3.0, math.pi)) == pytest.approx(
+        (math.pi / 2, 0.0, math.pi / 2))
+    # no turn (the series branch): the body-frame displacement itself; here
+    # heading pi/2, so world +x is the body's -y
+    assert se2.arc_between((0.0, 0.0, math.pi / 2), (0.5, 0.0, math.pi / 2)) == pytest.approx(
+        (0.0, -0.5, 0.0))
+    # integrate_arc of the result comes back to the end pose
+    start, arc = (0.3, -1.2, 2.5), (0.4, -0.7, -1.1)
+    end = se2.integrate_arc(start, *arc)
+    assert se2.arc_between(start, end) == pytest.approx(arc)

@@ -1,5 +1,6 @@
-"""The base controller on emulated ODrive and CiA 402 drives (python-can
-virtual bus, ROS-free): commands reach the wire as the exact inverse
+"""The base controller on emulated ODrive and CiA 402 drives (in a process
+of their own on a bus between processes, holonomic_testing.can_rig;
+ROS-free): commands reach the wire as the exact inverse
 kinematics, odometry comes from the reported encoders, and every kind of
 drive failure stops all motors within two control cycles, names the
 device, and blocks motion until the fault is gone and the base is re-armed.
@@ -66,15 +67,11 @@ def assert_free_motors_follow_torques(speeds, motor_torques, inertia, longest):
 
 
 def unhurried(backend: str) -> dict:
-    """Deadlines of a test about the mapping, not about deadlines (the
-    failure tests below check those): the emulated drives are threads of
-    this process, so when the OS starves the whole process (measured: the
-    loop's and the emulator's longest gaps 140-230 ms at load 3, 433 ms at
-    load 13, seconds at load 20; a 50 ms heartbeat then misses a 200 ms
-    timeout: 7 of 8 comr3 runs at load 3) they fall silent
-    with it, and the first check after the stall would count their silence
-    against them -- on a real bus the drives keep answering. 2 s is ~5x the
-    longest stall measured."""
+    """Deadlines for a test that plays or steps the drives itself from its
+    own thread (not real-time: on a loaded machine it stalls for hundreds
+    of ms, seconds at load 20), where the driver's watchdogs would count
+    the test's stalls against the drives. 2 s is ~5x the longest stall
+    measured at load 13 (433 ms)."""
     params = {f"{backend}.feedback_timeout": 2.0, f"{backend}.heartbeat_timeout": 2.0,
               "safety.reading_timeout": 2.0}
     if backend == "cia402":
@@ -85,14 +82,15 @@ def unhurried(backend: str) -> dict:
 @pytest.mark.parametrize("backend,robot", [
     ("odrive_can", "hamr"), ("cia402", "hamr"), ("odrive_can", "xr4000"), ("cia402", "comr3")])
 def test_cmd_reaches_the_wire_and_odometry_follows_the_encoders(rig_factory, backend, robot):
-    # About the mapping (IK on the wire, encoders -> odometry): unhurried
-    # deadlines. (comr3's six drives used to show a false "encoder glitch"
+    # About the mapping (IK on the wire, encoders -> odometry), with the
+    # product's deadlines: the drives run in a process of their own and the
+    # loop at real-time priority, as on a robot. (comr3's six drives used to show a false "encoder glitch"
     # about one run in three even on an idle machine: answers handled after
     # a stall longer than the driver's record of SYNCs were stamped with the
     # newest SYNC, and the emulated drives sampled a SYNC that reached them
     # late at their current position; both fixed, see cia402._answered_sync
     # and EmulatedCia402Drive._motor_at.)
-    rig = rig_factory(backend, robot, **unhurried(backend))
+    rig = rig_factory(backend, robot)
     assert rig.arm() == (True, "motors armed")
     twist = np.array([0.3, -0.2, 0.4])
     rig.run(1.5, twist)
@@ -208,7 +206,7 @@ def test_bad_frames_are_ignored_and_counted(rig_factory, backend):
     rig = rig_factory(backend, "hamr")
     assert rig.arm()[0]
     rig.run(0.3, [0.3, 0.0, 0.0])
-    script = can.Bus(interface="virtual", channel=rig.channel)
+    script = rig.open_bus()
     try:
         if backend == "odrive_can":
             bad = [(0x01, b"\x00\x00"),                          # node 0 heartbeat, 2 bytes
@@ -238,8 +236,10 @@ def test_shutdown_stops_and_disarms_every_drive(rig_factory, backend):
     t = time.time()
     rig.controller.shutdown()
     assert all(rig.stop_time(n, t) is not None for n in rig.node_ids)
-    time.sleep(0.3)
-    assert all(d.velocity_rev_per_s == 0.0 for d in rig.devices)
+    # then every motor stops: the emulated motors ramp down at 200 rev/s^2
+    # from < 1 rev/s, 5 ms; the drives run on a process of their own
+    rig.wait_for(lambda: all(d.velocity_rev_per_s == 0.0 for d in rig.devices), 2.0,
+                 "every motor at standstill")
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -484,17 +484,23 @@ def test_emulated_cia402_drive_samples_a_late_sync_at_its_stamp(rig_factory):
     assert abs(v) > 1.0                        # turning [rad/s] at the motor
     device.tick(t1 + 0.1)                     # stepped 0.1 s on, then the SYNC of t1 + 0.05
     assert device.motor().position() == pytest.approx(p1 + 0.1 * v)
-    sender = can.Bus(interface="virtual", channel=rig.channel, preserve_timestamps=True)
+    sender = rig.open_bus(preserve_timestamps=True)
     try:
         mark = len(rig.sniff())
         sender.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False,
                                 timestamp=t1 + 0.05))
+        sender.barrier()                      # the SYNC is in the drives' queues
         device.poll(t1 + 0.1)
     finally:
         sender.shutdown()
-    # (frames the loop sent before the emulator stopped are answered too)
-    (tpdo,) = [m for m in rig.sniff()[mark:] if m.arbitration_id == 0x180 + node
-               and m.timestamp == pytest.approx(t1 + 0.05 + device.ANSWER_DELAY, abs=1e-6)]
+
+    def answers():
+        # (frames the loop sent before the emulator stopped are answered too)
+        return [m for m in rig.sniff()[mark:] if m.arbitration_id == 0x180 + node
+                and m.timestamp == pytest.approx(t1 + 0.05 + device.ANSWER_DELAY, abs=1e-6)]
+    # the drive's answer crosses from its process to the sniffer's
+    rig.wait_for(answers, 5.0, "the drive's answer to the SYNC")
+    (tpdo,) = answers()
     counts, _ = struct.unpack("<ii", tpdo.data)
     expected = (p1 + 0.05 * v) / (2 * math.pi) * 16384
     assert counts == pytest.approx(expected, abs=1.0)

@@ -81,7 +81,7 @@ def test_every_frame_the_driver_sends_decodes_with_odrives_dbc(firmware):
             time.sleep(0.05)          # let the emulated axes answer
             phases[name] = rig.sniff()[start:]
 
-        phase("configure", driver.configure)
+        phase("configure", rig.configure_driver)
         phase("arm", driver.activate)
         phase("velocity", lambda: driver.write_velocities(JOINT_VELOCITIES))
         phase("torque", lambda: driver.write_efforts(JOINT_TORQUES))

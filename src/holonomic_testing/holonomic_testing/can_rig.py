@@ -1,20 +1,27 @@
-"""A base controller on emulated CAN drives, in the test process.
+"""A base controller on emulated CAN drives, modelled as on a robot.
 
-``CanRig(backend, robot)`` opens a private python-can virtual channel,
-starts one emulated drive per joint (background thread), a sniffer that
-records every frame with its send time, the driver and a BaseController.
-``run(seconds, twist)`` steps the controller at its rate in the product's
-ControlLoop and records when each cycle started.
+``CanRig(backend, robot)`` starts one emulated drive per joint in a process
+of its own at real-time priority (:mod:`holonomic_testing.drive_host`: a
+real drive is never starved by a busy host), on a private bus that crosses
+processes (python-can interface ``holonomic_ipc``,
+:mod:`holonomic_testing.ipc_can`); the product's driver, unchanged, opens it
+as it opens socketcan. A sniffer records every frame with its send time.
+``run(seconds, twist)`` steps the BaseController at its rate in the
+product's ControlLoop, on a thread with the loop process's scheduling
+(SCHED_FIFO at the default priority, tight timer slack), and records when
+each cycle started. ``devices`` are the drives (Remote objects: attributes
+and methods of the device in its process).
 """
 
 from __future__ import annotations
 
 import gc
 import itertools
-import math
 import os
+import shutil
 import struct
 import sys
+import tempfile
 import threading
 import time
 
@@ -24,10 +31,12 @@ import numpy as np
 from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
 from holonomic_core.loop import ControlLoop
+from holonomic_core.realtime import DEFAULT_PRIORITY, set_fifo, tighten_timer_slack
+from holonomic_core.se2 import arc_between
 from holonomic_drivers import cia402_protocol as co
 from holonomic_drivers import odrive_protocol as proto
-from holonomic_drivers.emulated_cia402 import EmulatedCia402Drive
-from holonomic_drivers.emulation import EmulatedOdriveAxis, EmulatorThread
+from holonomic_testing.drive_host import DriveHost
+from holonomic_testing.ipc_can import IpcBus
 
 _channels = itertools.count()
 
@@ -37,23 +46,29 @@ def unique_channel(tag: str) -> str:
 
 
 class CanRig:
-    def __init__(self, backend: str, robot: str = "hamr", **overrides):
-        # The emulated drives and the controller share this (large, long-lived)
-        # test process: a full garbage collection here can pause both for tens
-        # of ms and trip the drivers' feedback timeouts. The node freezes its
-        # own start-up objects for the same reason (base_controller_node.main).
+    def __init__(self, backend: str, robot: str = "hamr", realtime: bool = True, **overrides):
+        """``realtime``: ask for SCHED_FIFO for the drives' process and the
+        loop's thread (as the product's loop process does, default on); when
+        the system refuses, ``realtime_refused`` says why (one line, also on
+        stderr) and the rig runs without."""
+        # The controller shares this (large, long-lived) test process with
+        # canopen's notifier thread: a full garbage collection here can pause
+        # both for tens of ms. The loop process freezes its own start-up
+        # objects for the same reason (loop_host.run_host).
         gc.collect()
         gc.freeze()
         # ... and, like the node (base_controller_node.main), a short GIL
-        # switch interval: the loop, canopen's notifier and the emulated
-        # drives are threads of one process; with Python's default 5 ms a
-        # SYNC -> answer -> notifier round trip can wait tens of ms for the
-        # GIL on a busy machine and trip the 50 ms feedback timeout.
+        # switch interval: the loop and canopen's notifier are threads of
+        # one process; with Python's default 5 ms a SYNC -> answer ->
+        # notifier round trip can wait tens of ms for the GIL.
         self._switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(5e-4)
         self.backend = backend
-        self.channel = unique_channel(backend)
-        params = {"driver": backend, f"{backend}.interface": "virtual",
+        self.realtime = realtime
+        self._folder = tempfile.mkdtemp(prefix="holonomic-can-")
+        #: the bus: the hub's socket in the drives' process
+        self.channel = os.path.join(self._folder, "bus")
+        params = {"driver": backend, f"{backend}.interface": "holonomic_ipc",
                   f"{backend}.channel": self.channel}
         params.update(overrides)
         self.config = load_config(robot, params)
@@ -61,34 +76,51 @@ class CanRig:
         self.driver = self.config.driver_class(self.model, self.config.values,
                                                self.config.controller.control_rate)
         self.node_ids = self.driver.joints.node_ids
+        v = self.config.values
         if backend == "odrive_can":
-            firmware = self.config.values["odrive_can.firmware"]
-            self.devices = [EmulatedOdriveAxis(n, self.channel, firmware=firmware)
-                            for n in self.node_ids]
+            specs = [("odrive", n, {"firmware": v["odrive_can.firmware"]})
+                     for n in self.node_ids]
         else:
             # one emulated device per node, built from the joint's EDS (the
             # generic drive without one); its velocity unit is what the
             # file's 0x60A9 says, independent of the driver's parameters
-            v = self.config.values
-            self.devices = []
+            specs = []
             for n in dict.fromkeys(self.node_ids):
                 j = self.model.joint_names[self.node_ids.index(n)]
                 eds = v[f"cia402.joints.{j}.eds"] or v["cia402.eds"] or None
-                self.devices.append(EmulatedCia402Drive(
-                    n, self.channel, eds,
-                    encoder_resolution=int(v[f"cia402.joints.{j}.encoder_resolution"])))
-        self.sniffer = can.Bus(interface="virtual", channel=self.channel)
+                specs.append(("cia402", n, {
+                    "eds": eds,
+                    "encoder_resolution": int(v[f"cia402.joints.{j}.encoder_resolution"])}))
+        try:
+            self.host = DriveHost(specs, self.channel, realtime=realtime)
+        except BaseException:
+            shutil.rmtree(self._folder, ignore_errors=True)
+            raise
+        #: why real-time scheduling was refused (None: granted or not asked)
+        self.realtime_refused = self.host.realtime if realtime else None
+        self.devices = self.host.devices
+        #: the drives' EmulatorThread (``stop()`` it to step the drives by hand)
+        self.emulators = self.host.emulators
+        self.sniffer = self.open_bus()
         self.frames: list[can.Message] = []
-        self.emulators = EmulatorThread(self.devices).start()
         self.controller = None
         self.cycle_starts: list[float] = []
-        #: the odometry's twist after each cycle of ``run``
-        self.odometry_twists: list[np.ndarray] = []
         #: (reading stamp [s], odometry pose [m, m, rad]) after each cycle of ``run``
         self.odometry_poses: list[tuple[float, np.ndarray]] = []
 
+    def open_bus(self, **kwargs) -> IpcBus:
+        """Another node on the rig's bus (a test script; kwargs as for
+        python-can's virtual bus, e.g. ``preserve_timestamps=True``)."""
+        return IpcBus(channel=self.channel, **kwargs)
+
+    def configure_driver(self) -> None:
+        """The driver's configure, in a thread with the loop's scheduling:
+        the threads it starts (canopen's notifier, which handles every
+        answer of a CiA 402 drive) inherit it."""
+        self._with_loop_scheduling(self.driver.configure)
+
     def configure(self) -> "CanRig":
-        self.driver.configure()
+        self.configure_driver()
         self.controller = BaseController(self.config, self.driver)
         return self
 
@@ -118,9 +150,9 @@ class CanRig:
             if twist is not None:
                 self.controller.set_command(twist)
             self.step()
-            self.odometry_twists.append(self.controller.odometry.twist.copy())
-            self.odometry_poses.append((self.controller.reading.stamp,
-                                        self.controller.odometry.pose.copy()))
+            if self.controller.reading is not None:       # None: no reading yet (a fault)
+                self.odometry_poses.append((self.controller.reading.stamp,
+                                            self.controller.odometry.pose.copy()))
             count += 1
 
         def on_error(exc: BaseException) -> bool:
@@ -129,7 +161,7 @@ class CanRig:
             return False
 
         loop = ControlLoop(self.controller.dt, cycle, on_error, name="can_rig_loop")
-        loop.start()
+        self._with_loop_scheduling(loop.start)          # its thread inherits it
         try:
             if not done.wait(10.0 * seconds + 10.0):
                 raise TimeoutError(f"{cycles} cycles did not run within {10 * seconds + 10:g} s")
@@ -137,6 +169,35 @@ class CanRig:
             loop.stop()
         if errors:
             raise errors[0]
+
+    def _with_loop_scheduling(self, action):
+        """``action()`` in a short-lived thread given the loop process's
+        scheduling (loop_host.run_host: tight timer slack, SCHED_FIFO at the
+        default priority); the threads it starts inherit it, the test's own
+        threads keep theirs. Not mlockall: it would lock the whole pytest
+        session's memory for every later test (and a page fault is not what
+        starves a loaded machine's test, the CPU is)."""
+        outcome: list = []
+
+        def body() -> None:
+            tighten_timer_slack()
+            if self.realtime:
+                refused = set_fifo(DEFAULT_PRIORITY)
+                if refused is not None and self.realtime_refused is None:
+                    self.realtime_refused = refused
+                    print(f"can_rig: {refused}; the loop runs without", file=sys.stderr)
+            try:
+                outcome.append((True, action()))
+            except BaseException as exc:        # raised in the caller's thread
+                outcome.append((False, exc))
+
+        thread = threading.Thread(target=body, name="can_rig_scheduled")
+        thread.start()
+        thread.join()
+        ok, value = outcome[0]
+        if not ok:
+            raise value
+        return value
 
     def mean_odometry_twist(self, seconds: float) -> np.ndarray:
         """The constant body twist [m/s, m/s, rad/s] that takes the odometry
@@ -151,22 +212,23 @@ class CanRig:
         # repeat a reading)
         t0, start = next(((t, p) for t, p in reversed(self.odometry_poses)
                           if t <= t1 - seconds), self.odometry_poses[0])
-        dx, dy = end[0] - start[0], end[1] - start[1]
-        c, s = math.cos(start[2]), math.sin(start[2])
-        x, y = c * dx + s * dy, -s * dx + c * dy          # in the start pose's frame
-        theta = math.remainder(end[2] - start[2], 2 * math.pi)
-        # a constant twist (v, w) for time T moves by V(theta) v T, with
-        # V = [[sin t / t, -(1 - cos t) / t], [(1 - cos t) / t, sin t / t]]
-        if abs(theta) < 1e-9:
-            a, b = 1.0, 0.0
-        else:
-            a, b = math.sin(theta) / theta, (1.0 - math.cos(theta)) / theta
-        det = a * a + b * b
-        vx, vy = (a * x + b * y) / det, (-b * x + a * y) / det
-        return np.array([vx, vy, theta]) / (t1 - t0)
+        return arc_between(start, end) / (t1 - t0)
+
+    @staticmethod
+    def wait_for(predicate, timeout: float, what: str) -> None:
+        """Wait until ``predicate()`` is true, at most ``timeout`` [s] (then
+        AssertionError naming ``what``): for what crosses between the
+        processes (the drives' answers, their motors' state)."""
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+            time.sleep(0.01)
 
     def sniff(self) -> list[can.Message]:
-        """Every frame on the bus so far (send time in ``timestamp``)."""
+        """Every frame on the bus so far (send time in ``timestamp``), at
+        least all that the driver sent before the call."""
+        self.sniffer.barrier()
         while (msg := self.sniffer.recv(timeout=0.0)) is not None:
             self.frames.append(msg)
         return self.frames
@@ -179,10 +241,9 @@ class CanRig:
         try:
             self.driver.close()
         finally:
-            self.emulators.stop()
-            for device in self.devices:
-                device.close()
             self.sniffer.shutdown()
+            self.host.close()
+            shutil.rmtree(self._folder, ignore_errors=True)
             sys.setswitchinterval(self._switch_interval)
 
     # -- what the drives were told -----------------------------------------------------

@@ -1,8 +1,10 @@
 """Publish cmd_vel as fast as asked, from its own process (the flood test).
 
 Usage: python -m holonomic_testing.flood_publisher TOPIC RATE_HZ SECONDS FINAL_VX FINAL_VY FINAL_WZ
-Publishes alternating hostile-but-finite twists at RATE_HZ for SECONDS, then
-the final twist for 3 s at 20 Hz (which must win), and prints the achieved rate.
+Publishes alternating hostile-but-finite twists at RATE_HZ for SECONDS, prints
+"final command" (so a test waits for the end of the flood, not for a time: the
+start-up alone takes seconds on a loaded machine), then the final twist for
+3 s at 20 Hz (which must win), and prints the achieved rate.
 """
 
 import sys
@@ -43,6 +45,7 @@ def main() -> int:
     last = Twist()
     last.linear.x, last.linear.y, last.angular.z = final
     elapsed = time.monotonic() - start
+    print("final command", flush=True)
     for _ in range(60):            # then 3 s of the final command at 20 Hz
         pub.publish(last)
         time.sleep(0.05)
