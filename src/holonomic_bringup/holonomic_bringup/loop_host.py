@@ -146,8 +146,10 @@ def _fail(sock, exc) -> None:
     wire.send(sock, ("error", (exc.key, exc.value, exc.allowed, str(exc))))
 
 
-def _build(setup: HostSetup, sock):
-    """Configs, world, drivers and controllers; None after reporting an error."""
+def _build(setup: HostSetup, sock, before_drivers=None):
+    """Configs, world, drivers and controllers; None after reporting an error.
+    ``before_drivers(first config)`` runs once the configs are valid, before
+    any driver or world exists."""
     from holonomic_core.config import config_from_flat
     from holonomic_core.controller import BaseController
     from holonomic_core.driver import DriverError
@@ -160,6 +162,8 @@ def _build(setup: HostSetup, sock):
         except ConfigError as exc:
             _fail(sock, exc)
             return None
+    if before_drivers is not None:
+        before_drivers(configs[0])
     world = None
     if setup.shared_world:
         from holonomic_sim.world import SimWorld
@@ -203,7 +207,23 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
 
     beat = np.frombuffer(heartbeat, dtype=np.int64, count=1)
     clock = time.perf_counter
-    built = _build(setup, sock)
+    def schedule(first) -> None:
+        # before the drivers are built: the threads they start (canopen's
+        # notifier, python-can's receive thread, which handle every drive's
+        # answer) inherit the loop's scheduling; left on the normal scheduler
+        # they answer late on a loaded computer and the driver faults ("PDOs
+        # late"). The simulator's physics process sets its own priority.
+        if setup.in_process:
+            return
+        # sleeps end within 1 µs of the deadline instead of the default 50 µs
+        # (real-time threads get no slack anyway; normal ones do)
+        tighten_timer_slack()
+        for warning in schedule_loop(bool(first.values["loop.realtime"]),
+                                     int(first.values["loop.priority"]),
+                                     float(first.values["loop.slice"])):
+            wire.send(sock, ("log", 0, "warn", warning))
+
+    built = _build(setup, sock, schedule)
     if built is None:
         return 2
     world, robots = built
@@ -323,15 +343,6 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     add_part = loop.stats.add_part
     if stopping is not None:
         stopping.append(loop)
-    if not setup.in_process:
-        # sleeps end within 1 µs of the deadline instead of the default 50 µs
-        # (real-time threads get no slack anyway; normal ones do)
-        tighten_timer_slack()
-    if not setup.in_process:
-        for warning in schedule_loop(bool(first.values["loop.realtime"]),
-                                     int(first.values["loop.priority"]),
-                                     float(first.values["loop.slice"])):
-            wire.send(sock, ("log", 0, "warn", warning))
     state["policy"] = current_policy() + ("" if not setup.in_process else " (thread)")
     # The start-up objects out of the collector's way, and no collection
     # triggered by allocation counts in the middle of a cycle: the loop

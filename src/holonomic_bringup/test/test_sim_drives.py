@@ -17,6 +17,7 @@ import signal
 import subprocess
 import shutil
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -204,9 +205,34 @@ def test_bringup_with_sim_drives_drives_the_robot_over_ros(ros, start_bringup, b
         status = next(s for s in probe.diagnostics.status if s.name.endswith("driver"))
         values = {v.key: v.value for v in status.values}
         assert "motors = simulated joints" in values["sim_drives"]
+        if "real-time scheduling unavailable" not in proc.log():
+            # the loop asks for SCHED_FIFO before it builds the drivers, so the
+            # threads they start inherit it: the loop's own, the CAN driver's
+            # receive thread (it handles every drive's answer) and the emulated
+            # drives' thread. Asked after them (as before), only the loop's was
+            # real-time, and on a loaded computer the answers came late.
+            policies = _thread_policies(_loop_pid(proc.proc.pid))
+            assert policies.count(_SCHED_FIFO) >= 3, policies
     finally:
         probe.close()
     assert proc.stop(signal.SIGINT) == 0, proc.log()
+
+
+_SCHED_FIFO = 1
+
+
+def _loop_pid(node_pid: int) -> int:
+    """The loop process: the node's only child process."""
+    (child,) = [int(c) for task in Path(f"/proc/{node_pid}/task").iterdir()
+                for c in (task / "children").read_text().split()]
+    return child
+
+
+def _thread_policies(pid: int) -> list[int]:
+    """The scheduling policy of each thread of ``pid`` (proc(5): field 41 of
+    /proc/PID/task/TID/stat; 0 SCHED_OTHER, 1 SCHED_FIFO)."""
+    return [int((task / "stat").read_text().rsplit(")", 1)[1].split()[38])
+            for task in Path(f"/proc/{pid}/task").iterdir()]
 
 
 class _RecordingSim:

@@ -53,6 +53,14 @@ def set_fifo(priority: int) -> str | None:
     return None
 
 
+def set_normal() -> None:
+    """Put the calling process on the normal scheduler (SCHED_OTHER), e.g. a
+    helper process started by a real-time loop, which inherits its policy.
+    Leaving real-time needs no privilege."""
+    if os.sched_getscheduler(0) != os.SCHED_OTHER:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
 def lock_memory() -> str | None:
     """``mlockall(MCL_CURRENT | MCL_FUTURE)``. Returns None when granted,
     else why not (one line)."""

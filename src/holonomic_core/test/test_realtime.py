@@ -158,3 +158,18 @@ def test_a_refused_slice_is_one_warning_and_the_loop_runs_on(monkeypatch):
     assert realtime.schedule_loop(False, 50, 1e-4) == [
         "loop.slice 0.1 ms not applied, the loop keeps the kernel's default time slice: "
         "sched_setattr refused (EPERM)"]
+
+
+def test_set_normal_leaves_an_inherited_real_time_policy():
+    # the simulator's physics process is started by a loop that is already
+    # SCHED_FIFO; where it should run on the normal scheduler it calls set_normal
+    def run():
+        granted = realtime.set_fifo(10) is None
+        before = os.sched_getscheduler(0)
+        realtime.set_normal()
+        return granted, before, os.sched_getscheduler(0)
+
+    granted, before, after = _in_thread(run)
+    if not granted:
+        pytest.skip("SCHED_FIFO is not permitted here, so there is no real-time policy to leave")
+    assert (before, after) == (os.SCHED_FIFO, os.SCHED_OTHER)

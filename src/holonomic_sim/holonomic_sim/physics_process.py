@@ -364,12 +364,16 @@ def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
     (0: the loop closed the channels; 2: the driver did not configure)."""
     from holonomic_core.config import build_model
     from holonomic_core.driver import DriverError
-    from holonomic_core.realtime import set_fifo
+    from holonomic_core.realtime import set_fifo, set_normal
     from holonomic_sim.sim_driver import SimDriver
 
     flat, params, rate = pickle.loads(sock.recv(MAX_MESSAGE))
     params["sim.physics_process"] = False
     priority = plant_priority(params)
+    # started by the loop process, which asked for its scheduling before
+    # building its drivers: a real-time policy is inherited and replaced here
+    if priority is None:
+        set_normal()
     refused = None if priority is None else set_fifo(priority)
     scheduling = ("SCHED_OTHER" if priority is None else f"SCHED_FIFO {priority}"
                   if refused is None else f"SCHED_OTHER ({refused})")
