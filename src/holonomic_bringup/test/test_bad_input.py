@@ -102,6 +102,7 @@ ODOMETRY_EXPERIMENT = [
     (["--json", "{file}/x/trials.json"], "--json: cannot write"),
     (["--profiles", "out"], "--profiles needs --calibrate"),
     (["--calibrate", "--profiles", "{file}/x"], "--profiles: cannot create the folder"),
+    (["--recordings", "{file}/x"], "--recordings: cannot create the folder"),
 ]
 
 TORQUE_EXPERIMENT = [

@@ -172,6 +172,10 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("odometry.slip_heading_gain", "double",
               "Heading variance added per squared RMS contact residual, per second [s/m^2] "
               "(rad^2 per (m/s)^2 s).", default=2.18, minimum=0.0, maximum=1e6),
+    ParamSpec("odometry.latency_variance", "double",
+              "Mean square of the readings' latency [s^2]: the published pose covariance "
+              "adds latency_variance x u u^T, u the current twist in odom (the pose error of "
+              "a delay, which does not accumulate).", default=0.0, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
               "[(m/s)^2, (m/s)^2, (rad/s)^2].",
@@ -267,7 +271,8 @@ class ControllerConfig:
                                 v["odometry.slip_heading_gain"],
                                 tuple(v["odometry.twist_variance"]),
                                 tuple(v["odometry.twist_slip_gain"]),
-                                tuple(v["odometry.twist_lag_gain"])),
+                                tuple(v["odometry.twist_lag_gain"]),
+                                v["odometry.latency_variance"]),
             twist_window=v["odometry.twist_window"],
             slip=SlipLimits(v["diagnostics.slip_threshold"], v["diagnostics.slip_duration"]),
             monitor=MonitorLimits(v["safety.velocity_factor"], v["safety.reading_timeout"],

@@ -47,7 +47,7 @@ from holonomic_core.se2 import wrap_angle
 
 #: pose coefficients (OdometryNoise fields), heading-only ones first
 HEADING_KEYS = ("angular_variance_per_radian", "angular_variance_per_meter",
-                "slip_heading_gain")
+                "slip_heading_gain", "latency_variance")
 POSITION_KEYS = ("linear_variance_per_meter", "slip_position_gain")
 CHI2_2_95 = 5.991            # 95 % quantile of chi^2 with 2 degrees of freedom
 Z_95 = 1.96
@@ -61,7 +61,7 @@ WARM_UP = 1.0                # [s] before the first sample
 
 def _zero_noise(**values) -> OdometryNoise:
     base = OdometryNoise(0.0, 0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
-                        (0.0, 0.0, 0.0))
+                        (0.0, 0.0, 0.0), 0.0)
     return replace(base, **values)
 
 
@@ -231,10 +231,13 @@ def _scale_to_coverage(inside, groups) -> float:
 def _band_loss(fractions: np.ndarray) -> float:
     """How far per-floor coverages are from 95 %: squared, 4x heavier below
     95 % (over-confidence misleads a fusion filter; over-coverage only costs
-    it weight), and 100x heavier below the band's 90 %."""
+    it weight), and 100x heavier outside the band (below 90 %, above
+    99.5 %: a floor covered 100 % is as much out of the band as one at
+    85 %, it only errs on the safe side)."""
     d = fractions - TARGET_COVERAGE
     return float(np.sum(np.where(d < 0.0, 4.0, 1.0) * d * d)
-                 + 100.0 * np.sum(np.maximum(BAND[0] - fractions, 0.0) ** 2))
+                 + 100.0 * np.sum(np.maximum(BAND[0] - fractions, 0.0) ** 2)
+                 + 100.0 * np.sum(np.maximum(fractions - BAND[1], 0.0) ** 2))
 
 
 def _coverage_search(inside, c0: np.ndarray, natural: np.ndarray, groups) -> np.ndarray:
@@ -249,8 +252,9 @@ def _coverage_search(inside, c0: np.ndarray, natural: np.ndarray, groups) -> np.
     ``c0``: the likelihood fit, scaled; ``natural``: per coefficient, the
     value at which its basis alone explains the mean squared error (the
     grid's centre for a coefficient the likelihood drove to 0). Grid: 0 and
-    4 decades around the centre, 4 points per decade; then one common scale
-    refined between 1/2 and 2.
+    4 decades around the centre, 2 points per decade (4 coefficients: 10^4
+    points); then each coefficient, and one common scale, refined between
+    1/2 and 2.
     """
     labels = list(dict.fromkeys(groups.tolist()))
     masks = [groups == g for g in labels]
@@ -260,18 +264,27 @@ def _coverage_search(inside, c0: np.ndarray, natural: np.ndarray, groups) -> np.
         return _band_loss(np.array([np.mean(hit[m]) for m in masks]))
 
     centre = np.where(c0 > 0.0, c0, natural)
-    axes = [np.concatenate(([0.0], ck * np.logspace(-3.0, 1.0, 17))) for ck in centre]
-    best, best_loss = c0, loss(c0)
+    axes = [np.concatenate(([0.0], ck * np.logspace(-3.0, 1.0, 9))) for ck in centre]
+    best, best_loss = np.asarray(c0, float), loss(c0)
     for point in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(c0)):
         if not point.any():
             continue
         value = loss(point)
         if value < best_loss:
             best, best_loss = point, value
-    for f in np.geomspace(0.5, 2.0, 41):
-        value = loss(best * f)
-        if value < best_loss - 1e-15:
-            best, best_loss = best * f, value
+    factors = np.geomspace(0.5, 2.0, 17)
+    for _ in range(2):
+        for k in range(len(best)):
+            for f in factors:
+                point = best.copy()
+                point[k] *= f
+                value = loss(point)
+                if value < best_loss - 1e-15:
+                    best, best_loss = point, value
+        for f in factors:
+            value = loss(best * f)
+            if value < best_loss - 1e-15:
+                best, best_loss = best * f, value
     return np.asarray(best, float)
 
 
@@ -456,6 +469,7 @@ def noise_yaml(noise: OdometryNoise, twist_window: float) -> str:
         f"      twist_variance: [{', '.join(g(v) for v in noise.twist_variance)}]",
         f"      twist_slip_gain: [{', '.join(g(v) for v in noise.twist_slip_gain)}]",
         f"      twist_lag_gain: [{', '.join(g(v) for v in noise.twist_lag_gain)}]",
+        f"      latency_variance: {g(noise.latency_variance)}",
     ])
 
 
