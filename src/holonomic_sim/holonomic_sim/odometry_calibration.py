@@ -413,6 +413,32 @@ def _pooled(per_run: list) -> dict:
     return out
 
 
+def random_walk_spread(samples_per_run: int = 400, warm_up: int = 10, runs: int = 4000,
+                       seed: int = 0) -> dict:
+    """Coverage of a *perfectly calibrated* random walk, run by run.
+
+    A pose error that is a random walk with exactly the published variance
+    (sigma^2 ~ t) is inside its 95 % region 95 % of the time on average,
+    but one run's fraction is one path's: a path that wanders out stays out
+    for a while. Simulated here (``runs`` paths of ``samples_per_run``
+    steps, the first ``warm_up`` not counted, like the calibration's
+    samples): the standard deviation between runs of the fraction, 1-D
+    (heading, a twist axis) and 2-D (position, chi^2 with 2 degrees of
+    freedom). It does not shrink with longer runs (a random walk looks the
+    same at every time scale); only more runs shrink the standard error of
+    the mean, as 1/sqrt(runs). Returns {"heading": sd, "position": sd,
+    "heading_mean": mean, "position_mean": mean}.
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(1, samples_per_run + 1)[warm_up:]
+    one = np.cumsum(rng.standard_normal((runs, samples_per_run)), axis=1)[:, warm_up:]
+    two = np.cumsum(rng.standard_normal((runs, samples_per_run, 2)), axis=1)[:, warm_up:]
+    heading = np.mean(np.abs(one) <= Z_95 * np.sqrt(t), axis=1)
+    position = np.mean(np.sum(two * two, axis=2) / t <= CHI2_2_95, axis=1)
+    return {"heading": float(np.std(heading)), "position": float(np.std(position)),
+            "heading_mean": float(np.mean(heading)), "position_mean": float(np.mean(position))}
+
+
 def band_table(rows: list) -> str:
     """Coverage with its uncertainty, one row per (label, held_out() dict):
     percent, +- the standard error over the runs; '!' marks a fraction
@@ -620,6 +646,14 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
                       "binomial standard error of the position fraction over the samples, "
                       "! outside 90-99.5 %):")
                 print(band_table(rows))
+            spread = random_walk_spread(int(np.mean([len(samples.subset(runs=[r]).error)
+                                                     for r in samples.runs])))
+            print(f"\nfor scale: a perfectly calibrated random walk covers 95 % on average, "
+                  f"but one run's fraction has a standard deviation of "
+                  f"{100 * spread['position']:.0f} % (position) and "
+                  f"{100 * spread['heading']:.0f} % (heading) between runs: "
+                  "even an exact covariance shows a +- (standard error over runs) of about "
+                  "that / sqrt(runs)")
             held = dict(rows)
             for floor, prof in profiles.items():
                 name = (floor_names or {}).get(floor, floor)
