@@ -333,6 +333,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="config name or YAML")
     parser.add_argument("--seeds", type=number(1, 10000, integer=True), default=20,
                         help="random runs per condition")
+    parser.add_argument("--first-seed", type=number(0, 1000000, integer=True), default=0,
+                        help="seed of the first run (the runs use --first-seed, +1, ...): a "
+                             "drive none of the calibration's seeds made")
     parser.add_argument("--duration", type=number(0.0, 3600.0, strict_low=True, unit="s"),
                         default=60.0, help="random motion [s]")
     parser.add_argument("--speed", type=number(0.0, 10.0, strict_low=True, unit="m/s"),
@@ -381,7 +384,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     trials, recordings = [], []
     for condition in args.condition or list(CONDITIONS):
-        for seed in range(args.seeds):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             try:
                 drives = not CONDITIONS[condition]["sim.ideal_motors"]
                 extra = drive_overrides if drives else None
