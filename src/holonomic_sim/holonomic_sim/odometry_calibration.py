@@ -288,9 +288,21 @@ def _coverage_search(inside, c0: np.ndarray, natural: np.ndarray, groups) -> np.
     return np.asarray(best, float)
 
 
+#: a basis whose mean is below this is rounding, not a term of the robot: a
+#: DDROT's slip residual is ~1e-12 m/s (square Jacobian), and a coefficient
+#: fitted to it would be ~1e+20 times anything physical
+BASIS_FLOOR = 1e-10
+
+
+def _present(bases: np.ndarray) -> np.ndarray:
+    """1.0 for the basis columns the samples can see, 0.0 for absent ones."""
+    return (bases.mean(axis=0) > BASIS_FLOOR).astype(float)
+
+
 def _natural(bases: np.ndarray, err2: np.ndarray) -> np.ndarray:
-    """Per basis column, the coefficient that alone explains mean(err2)."""
-    return err2.mean() / np.maximum(bases.mean(axis=0), 1e-300)
+    """Per basis column, the coefficient that alone explains mean(err2)
+    (0 for an absent basis, :data:`BASIS_FLOOR`)."""
+    return _present(bases) * err2.mean() / np.maximum(bases.mean(axis=0), 1e-300)
 
 
 def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
@@ -308,7 +320,7 @@ def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
     # heading: P22 = sum_k c_k B_k22
     h_bases = np.stack([samples.bases[k][:, 2, 2] for k in HEADING_KEYS], axis=1)
 
-    h = _fit_variances(h_bases, e[:, 2] ** 2)
+    h = _fit_variances(h_bases, e[:, 2] ** 2) * _present(h_bases)
     hvar = h_bases @ h
     s = _scale_to_coverage(lambda f: np.abs(e[:, 2]) <= Z_95 * np.sqrt(f * hvar), g)
     h = h * s
@@ -320,12 +332,12 @@ def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
     fixed = sum(getattr(noise, k) * samples.bases[k] for k in HEADING_KEYS)[:, :2, :2]
     p_bases = [samples.bases[k][:, :2, :2] for k in POSITION_KEYS]
 
-    p = _fit_covariances(fixed, p_bases, e[:, :2])
+    traces = np.stack([b[:, 0, 0] + b[:, 1, 1] for b in p_bases], axis=1)
+    p = _fit_covariances(fixed, p_bases, e[:, :2]) * _present(traces)
     s = _scale_to_coverage(lambda f: mahalanobis2(
         e[:, :2], fixed + f * sum(ci * b for ci, b in zip(p, p_bases))) <= CHI2_2_95, g)
     p = p * s
     if several:
-        traces = np.stack([b[:, 0, 0] + b[:, 1, 1] for b in p_bases], axis=1)
         p = _coverage_search(lambda c: mahalanobis2(
             e[:, :2], fixed + sum(ci * b for ci, b in zip(c, p_bases))) <= CHI2_2_95, p,
             _natural(traces, np.sum(e[:, :2] ** 2, axis=1)), g)
@@ -337,7 +349,7 @@ def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
         basis = np.stack([np.ones(len(te)), samples.slip_basis[:, j], samples.lag_basis[:, j]],
                          axis=1)
 
-        c = _fit_variances(basis, te[:, j] ** 2)
+        c = _fit_variances(basis, te[:, j] ** 2) * _present(basis)
         var = basis @ c
         c = c * _scale_to_coverage(lambda f: np.abs(te[:, j]) <= Z_95 * np.sqrt(f * var), g)
         coeffs.append(c)

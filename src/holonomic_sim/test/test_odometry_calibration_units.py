@@ -56,3 +56,15 @@ def test_a_recording_round_trips_through_its_cache_file(tmp_path):
               recording_path(str(tmp_path), "xr4000", condition, 3, 40.0, 1.25, 2.0,
                              {"sim.drive.bandwidth": 120.0})}
     assert path not in others and len(others) == 3
+
+
+def test_a_basis_at_rounding_level_gets_no_coefficient():
+    # a DDROT's slip residual is ~1e-12 m/s: its basis (rho^2 dt summed) is
+    # ~1e-24; "the coefficient that alone explains the error" would be
+    # ~1e+20 and, multiplied by a basis that is rounding, meaningless
+    from holonomic_sim.odometry_calibration import _natural, _present
+    bases = np.array([[1.0, 1e-24], [2.0, 3e-24]])
+    err2 = np.array([0.5, 1.0])
+    assert _present(bases).tolist() == [1.0, 0.0]
+    # column 0: mean(err2) / mean(basis) = 0.75 / 1.5
+    assert _natural(bases, err2).tolist() == [0.5, 0.0]
