@@ -82,14 +82,14 @@ class OdometryNoise:
     """
 
     linear_variance_per_meter: float = 0.0
-    angular_variance_per_radian: float = 5.26e-6
+    angular_variance_per_radian: float = 0.0
     angular_variance_per_meter: float = 0.0
-    slip_position_gain: float = 0.327
-    slip_heading_gain: float = 2.18
-    twist_variance: tuple[float, float, float] = (8.39e-6, 5.71e-6, 3.77e-5)
-    twist_slip_gain: tuple[float, float, float] = (0.268, 0.254, 6.97)
-    twist_lag_gain: tuple[float, float, float] = (1.23, 1.27, 1.9)
-    latency_variance: float = 0.0
+    slip_position_gain: float = 0.236
+    slip_heading_gain: float = 2.81
+    twist_variance: tuple[float, float, float] = (7.51e-06, 5.89e-06, 3.48e-05)
+    twist_slip_gain: tuple[float, float, float] = (0.285, 0.327, 6.17)
+    twist_lag_gain: tuple[float, float, float] = (1.21, 1.27, 1.74)
+    latency_variance: float = 6.5e-07
 
 
 class Odometry:
