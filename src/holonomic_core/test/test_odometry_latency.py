@@ -14,21 +14,10 @@ import pytest
 
 from holonomic_core.model import load_model
 from holonomic_core.odometry import Odometry, OdometryNoise
+from test_limits_odometry import drive   # constant body twist -> encoder readings
 
 ZERO = (0.0, 0.0, 0.0)
 LATENCY = OdometryNoise(0.0, 0.0, 0.0, 0.0, 0.0, ZERO, ZERO, ZERO, latency_variance=1e-4)
-
-
-def drive(model, odo, q, twist, seconds, t, rate=200.0):
-    """Encoder readings of a base driven by a constant body twist (joint
-    rates re-solved in 10 sub-steps per reading)."""
-    dt = 1.0 / rate
-    for _ in range(int(round(seconds * rate))):
-        for _ in range(10):
-            q = q + model.inverse(q, twist) * dt / 10
-        t += dt
-        odo.update(q, t)
-    return q, t
 
 
 def test_straight_motion_adds_variance_along_the_motion_only():
@@ -39,7 +28,7 @@ def test_straight_motion_adds_variance_along_the_motion_only():
     odo.update(q, 0.0)
     # body x at 1 m/s, heading pi/2: u = (0, 1, 0) m/s in odom, so the
     # covariance is 1e-4 s^2 * (1 m/s)^2 = 1e-4 m^2 along y, nothing else
-    q, t = drive(model, odo, q, np.array([1.0, 0.0, 0.0]), 0.5, 0.0)
+    q, t = drive(model, odo, q, np.array([1.0, 0.0, 0.0]), 0.5)
     expected = np.diag([0.0, 1e-4, 0.0])
     assert odo.pose_covariance == pytest.approx(expected, abs=1e-9)
 
@@ -51,7 +40,7 @@ def test_turning_adds_heading_variance_that_goes_when_the_base_stops():
     odo.update(q, 0.0)
     # a turn on the spot at 2 rad/s: u = (0, 0, 2), heading variance
     # 1e-4 s^2 * (2 rad/s)^2 = 4e-4 rad^2
-    q, t = drive(model, odo, q, np.array([0.0, 0.0, 2.0]), 0.5, 0.0)
+    q, t = drive(model, odo, q, np.array([0.0, 0.0, 2.0]), 0.5)
     assert odo.pose_covariance[2, 2] == pytest.approx(4e-4, rel=1e-3)
     assert odo.pose_covariance[:2, :2] == pytest.approx(np.zeros((2, 2)), abs=1e-9)
     # stopped for longer than the twist window: the twist is 0, and so is
@@ -69,6 +58,6 @@ def test_without_latency_variance_the_covariance_is_the_accumulated_one():
                           slip_heading_gain=0.0, latency_variance=0.0)
     odo = Odometry(model, noise=noise, twist_window=0.03)
     odo.update(np.zeros(3), 0.0)
-    drive(model, odo, np.zeros(3), np.array([1.0, 0.0, 0.0]), 1.0, 0.0)
+    drive(model, odo, np.zeros(3), np.array([1.0, 0.0, 0.0]), 1.0)
     # along-track: 1e-3 m^2/m * 1 m, no term from the 1 m/s twist
     assert odo.pose_covariance[0, 0] == pytest.approx(1e-3, rel=1e-3)
