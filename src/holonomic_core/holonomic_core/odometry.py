@@ -61,8 +61,8 @@ class OdometryNoise:
     slip level (sigma ~ rho), which a term linear in rho does not.
 
     Latency, a term that does not accumulate: the readings are older than
-    their stamps (the drive's feedback and bus delays, the mean-rate fit over
-    the last interval), so the published pose is where the base was a time
+    their stamps (the drive's feedback and bus delays), so the published
+    pose is where the base was a time
     ``tau`` before the stamp, off from the true pose by ``tau * u`` with
     ``u = (R(yaw) (vx, vy), wz)`` the current twist in odom. With ``tau``
     unknown but of variance ``latency_variance`` [s^2] (its mean square: a
