@@ -97,11 +97,13 @@ DEMO = [
 ODOMETRY_EXPERIMENT = [
     (["--robot", "hamrr"], "did you mean 'hamr'"),
     (["--seeds", "0"], "--seeds: expected an integer in [1, 10000]"),
+    (["--first-seed", "-1"], "--first-seed: expected an integer in [0, 1e+06]"),
     (["--duration", "-5"], "--duration: expected a number in (0, 3600] s"),
     (["--condition", "wet"], "expected one of nominal, uneven, slippery, worn"),
     (["--json", "{file}/x/trials.json"], "--json: cannot write"),
     (["--profiles", "out"], "--profiles needs --calibrate"),
     (["--calibrate", "--profiles", "{file}/x"], "--profiles: cannot create the folder"),
+    (["--recordings", "{file}/x"], "--recordings: cannot create the folder"),
 ]
 
 TORQUE_EXPERIMENT = [

@@ -149,7 +149,7 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "Arm the motors at start. Default false: motors start disarmed and "
               "~/enable arms them.", default=False),
     # defaults: the XR4000's all-floor profile on the drive model (config/xr4000.yaml):
-    # holonomic-odometry-experiment --robot xr4000 --seeds 5 --duration 40 --condition
+    # holonomic-odometry-experiment --robot xr4000 --seeds 6 --duration 40 --condition
     # drives-nominal --condition drives-uneven --condition drives-slippery --condition
     # drives-worn --calibrate (docs/odometry_experiment.md)
     ParamSpec("odometry.twist_window", "double",
@@ -161,28 +161,32 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               default=0.0, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.angular_variance_per_radian", "double",
               "Heading variance added per radian turned [rad^2/rad].",
-              default=5.26e-6, minimum=0.0, maximum=1.0),
+              default=0.0, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.angular_variance_per_meter", "double",
               "Heading variance added per metre travelled [rad^2/m].",
               default=0.0, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.slip_position_gain", "double",
               "Position variance added per squared RMS contact residual the estimator could "
               "not explain, per second [s] (m^2 per (m/s)^2 s).",
-              default=0.327, minimum=0.0, maximum=1e4),
+              default=0.236, minimum=0.0, maximum=1e4),
     ParamSpec("odometry.slip_heading_gain", "double",
               "Heading variance added per squared RMS contact residual, per second [s/m^2] "
-              "(rad^2 per (m/s)^2 s).", default=2.18, minimum=0.0, maximum=1e6),
+              "(rad^2 per (m/s)^2 s).", default=2.81, minimum=0.0, maximum=1e6),
+    ParamSpec("odometry.latency_variance", "double",
+              "Mean square of the readings' latency [s^2]: the published pose covariance "
+              "adds latency_variance x u u^T, u the current twist in odom (the pose error of "
+              "a delay, which does not accumulate).", default=6.5e-07, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
               "[(m/s)^2, (m/s)^2, (rad/s)^2].",
-              default=(8.39e-6, 5.71e-6, 3.77e-5), minimum=0.0, maximum=100.0, min_length=3),
+              default=(7.51e-06, 5.89e-06, 3.48e-05), minimum=0.0, maximum=100.0, min_length=3),
     ParamSpec("odometry.twist_slip_gain", "double_array",
               "Twist variance (vx, vy, wz) added per (m/s)^2 of squared RMS contact residual "
-              "[-, -, 1/m^2].", default=(0.268, 0.254, 6.97), minimum=0.0, maximum=1e4,
+              "[-, -, 1/m^2].", default=(0.285, 0.327, 6.17), minimum=0.0, maximum=1e4,
               min_length=3),
     ParamSpec("odometry.twist_lag_gain", "double_array",
               "Twist variance (vx, vy, wz) added per squared lag error of the axis, "
-              "(acceleration x half the twist window)^2 [-].", default=(1.23, 1.27, 1.9),
+              "(acceleration x half the twist window)^2 [-].", default=(1.21, 1.27, 1.74),
               minimum=0.0, maximum=1e4, min_length=3),
     ParamSpec("diagnostics.slip_threshold", "double",
               "Odometry residual of one caster above which it counts as slipping [m/s].",
@@ -267,7 +271,8 @@ class ControllerConfig:
                                 v["odometry.slip_heading_gain"],
                                 tuple(v["odometry.twist_variance"]),
                                 tuple(v["odometry.twist_slip_gain"]),
-                                tuple(v["odometry.twist_lag_gain"])),
+                                tuple(v["odometry.twist_lag_gain"]),
+                                v["odometry.latency_variance"]),
             twist_window=v["odometry.twist_window"],
             slip=SlipLimits(v["diagnostics.slip_threshold"], v["diagnostics.slip_duration"]),
             monitor=MonitorLimits(v["safety.velocity_factor"], v["safety.reading_timeout"],

@@ -60,6 +60,19 @@ class OdometryNoise:
     ``slip_heading_gain`` [s/m^2]. They make the covariance scale with the
     slip level (sigma ~ rho), which a term linear in rho does not.
 
+    Latency, a term that does not accumulate: the readings are older than
+    their stamps (the drive's feedback and bus delays), so the published
+    pose is where the base was a time
+    ``tau`` before the stamp, off from the true pose by ``tau * u`` with
+    ``u = (R(yaw) (vx, vy), wz)`` the current twist in odom. With ``tau``
+    unknown but of variance ``latency_variance`` [s^2] (its mean square: a
+    fixed delay is a variance of delay^2), the published pose covariance is
+    the accumulated one plus ``latency_variance * u u^T`` (rank one, along
+    the motion). On a good floor this is most of the heading error: it
+    follows the turn rate and comes back when the base stops turning, which
+    a random walk, growing for ever, cannot describe (the accumulated terms
+    either over-cover the good floor or under-cover the slippery one).
+
     Twist covariance, diagonal (vx, vy, wz) [(m/s)^2, (m/s)^2, (rad/s)^2]:
     ``twist_variance + twist_slip_gain * rho^2 + twist_lag_gain * (a lag)^2``
     per axis, with ``a`` the estimated acceleration of that axis and ``lag``
@@ -69,13 +82,14 @@ class OdometryNoise:
     """
 
     linear_variance_per_meter: float = 0.0
-    angular_variance_per_radian: float = 5.26e-6
+    angular_variance_per_radian: float = 0.0
     angular_variance_per_meter: float = 0.0
-    slip_position_gain: float = 0.327
-    slip_heading_gain: float = 2.18
-    twist_variance: tuple[float, float, float] = (8.39e-6, 5.71e-6, 3.77e-5)
-    twist_slip_gain: tuple[float, float, float] = (0.268, 0.254, 6.97)
-    twist_lag_gain: tuple[float, float, float] = (1.23, 1.27, 1.9)
+    slip_position_gain: float = 0.236
+    slip_heading_gain: float = 2.81
+    twist_variance: tuple[float, float, float] = (7.51e-06, 5.89e-06, 3.48e-05)
+    twist_slip_gain: tuple[float, float, float] = (0.285, 0.327, 6.17)
+    twist_lag_gain: tuple[float, float, float] = (1.21, 1.27, 1.74)
+    latency_variance: float = 6.5e-07
 
 
 class Odometry:
@@ -134,9 +148,18 @@ class Odometry:
 
     @property
     def pose_covariance(self) -> np.ndarray:
-        """Covariance (3 x 3) of (x, y, yaw) in odom [m^2, m rad, rad^2]."""
+        """Covariance (3 x 3) of (x, y, yaw) in odom [m^2, m rad, rad^2]:
+        the accumulated one plus the latency term of the current twist
+        (:class:`OdometryNoise`)."""
         p00, p01, p02, p11, p12, p22 = self._P
-        return np.array([[p00, p01, p02], [p01, p11, p12], [p02, p12, p22]])
+        P = np.array([[p00, p01, p02], [p01, p11, p12], [p02, p12, p22]])
+        lat = self.noise.latency_variance
+        if lat > 0.0:
+            vx, vy, wz = self.twist.tolist()
+            c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
+            u = np.array([c * vx - s * vy, s * vx + c * vy, wz])
+            P += lat * np.outer(u, u)
+        return P
 
     @property
     def twist_covariance(self) -> np.ndarray:

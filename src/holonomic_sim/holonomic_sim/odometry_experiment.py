@@ -153,6 +153,19 @@ def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, flo
     return (c * vx_w + s * vy_w, -s * vx_w + c * vy_w, wz)
 
 
+def run_overrides(seed: int, speed: float, acceleration: float,
+                  overrides: dict | None = None) -> dict:
+    """The config keys a run is made with: its seed, the limits (``speed``
+    [m/s], ``acceleration`` [m/s^2]), then ``overrides``."""
+    merged = {"sim.seed": seed, "cmd_timeout": 0.0, "enable_on_start": True}
+    for axis in ("x", "y"):
+        merged[f"limits.linear.{axis}.max_velocity"] = speed
+        merged[f"limits.linear.{axis}.max_acceleration"] = acceleration
+        merged[f"limits.linear.{axis}.max_deceleration"] = acceleration
+    merged.update(overrides or {})
+    return merged
+
+
 def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
              speed: float = 1.25, acceleration: float = 2.0, overrides: dict | None = None,
              calibration: dict | None = None, condition: str = "") -> Recording:
@@ -162,12 +175,7 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
     simulated robot (a slip condition, simulator faults, the drive model);
     ``calibration``: config keys for the controller only (a calibration
     overlay), so the simulated robot keeps its geometry and faults."""
-    merged = {"sim.seed": seed, "cmd_timeout": 0.0, "enable_on_start": True}
-    for axis in ("x", "y"):
-        merged[f"limits.linear.{axis}.max_velocity"] = speed
-        merged[f"limits.linear.{axis}.max_acceleration"] = acceleration
-        merged[f"limits.linear.{axis}.max_deceleration"] = acceleration
-    merged.update(overrides or {})
+    merged = run_overrides(seed, speed, acceleration, overrides)
     cfg = load_config(robot, {**merged, **(calibration or {})})
     physical = load_config(robot, merged).model if calibration else cfg.model
     clock = ManualClock()
@@ -232,6 +240,39 @@ def record_run(robot: str, condition: str, seed: int, duration: float = 60.0,
                     {**CONDITIONS[condition], **(overrides or {})}, calibration, condition)
 
 
+def recording_path(folder: str, robot: str, condition: str, seed: int, duration: float,
+                   speed: float, acceleration: float, overrides: dict | None = None) -> str:
+    """Where ``--recordings FOLDER`` keeps one run: the file name holds every
+    argument that changes the simulation (robot, condition, seed, duration,
+    limits, the ``-p`` overrides), so a cached run is only reused for the
+    same run."""
+    extra = "".join(f"_{k}={v}" for k, v in sorted((overrides or {}).items()))
+    name = (f"{os.path.splitext(os.path.basename(robot))[0]}_{PROFILE_NAMES[condition]}_seed{seed}"
+            f"_{duration:g}s_{speed:g}mps_{acceleration:g}mps2{extra}.npz")
+    return os.path.join(folder, name.replace(os.sep, "_"))
+
+
+def save_recording(rec: Recording, path: str) -> None:
+    """Write a recording's arrays to ``path`` (.npz, no pickled objects)."""
+    tmp = path + ".part.npz"
+    np.savez_compressed(tmp, stamps=rec.stamps, positions=rec.positions, truth=rec.truth,
+                        truth_twist=rec.truth_twist, internal_force=rec.internal_force,
+                        seconds=rec.seconds, fault=rec.fault or "",
+                        hidden_truth=json.dumps(rec.hidden_truth))
+    os.replace(tmp, path)
+
+
+def load_recording(path: str, robot: str, condition: str, seed: int, config) -> Recording:
+    """A recording written by :func:`save_recording`; ``config``: the robot
+    config the run was made with (not stored: it is re-loaded)."""
+    with np.load(path, allow_pickle=False) as data:
+        return Recording(robot, condition, seed, config, data["stamps"], data["positions"],
+                         data["truth"], data["truth_twist"], seconds=float(data["seconds"]),
+                         internal_force=data["internal_force"],
+                         fault=str(data["fault"]) or None,
+                         hidden_truth=json.loads(str(data["hidden_truth"])))
+
+
 def final_errors(rec: Recording) -> Trial:
     """The final error of every estimator integrating the same recording."""
     path = rec.truth
@@ -292,6 +333,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="config name or YAML")
     parser.add_argument("--seeds", type=number(1, 10000, integer=True), default=20,
                         help="random runs per condition")
+    parser.add_argument("--first-seed", type=number(0, 1000000, integer=True), default=0,
+                        help="seed of the first run (the runs use --first-seed, +1, ...): a "
+                             "drive none of the calibration's seeds made")
     parser.add_argument("--duration", type=number(0.0, 3600.0, strict_low=True, unit="s"),
                         default=60.0, help="random motion [s]")
     parser.add_argument("--speed", type=number(0.0, 10.0, strict_low=True, unit="m/s"),
@@ -321,27 +365,48 @@ def main(argv: list[str] | None = None) -> int:
                         help="with --calibrate and several conditions: write one covariance "
                              "profile per floor to DIR/ROBOT_FLOOR.yaml (a params file for "
                              "holonomic-bringup --params-file)")
+    parser.add_argument("--recordings", metavar="DIR",
+                        help="keep each run's recording in DIR (one .npz per run, named by "
+                             "its arguments) and reuse the ones already there: re-calibrate "
+                             "or re-check without re-simulating")
     args = parser.parse_args(argv)
     if args.profiles and not args.calibrate:
         parser.error("--profiles needs --calibrate")
-    if args.profiles:
+    for option, folder in (("--profiles", args.profiles), ("--recordings", args.recordings)):
         try:    # before the runs, not after them
-            os.makedirs(args.profiles, exist_ok=True)
+            if folder:
+                os.makedirs(folder, exist_ok=True)
         except OSError as exc:
-            parser.error(f"--profiles: cannot create the folder {args.profiles!r}: "
-                         f"{exc.strerror}")
+            parser.error(f"{option}: cannot create the folder {folder!r}: {exc.strerror}")
     try:
         drive_overrides = parse_overrides(args.param)
     except ValueError as exc:
         parser.error(str(exc))
     trials, recordings = [], []
     for condition in args.condition or list(CONDITIONS):
-        for seed in range(args.seeds):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             try:
                 drives = not CONDITIONS[condition]["sim.ideal_motors"]
-                rec = record_run(args.robot, condition, seed, args.duration,
-                                 speed=args.speed, acceleration=args.acceleration,
-                                 overrides=drive_overrides if drives else None)
+                extra = drive_overrides if drives else None
+                cached = args.recordings and recording_path(
+                    args.recordings, args.robot, condition, seed, args.duration, args.speed,
+                    args.acceleration, extra)
+                rec = None
+                if cached and os.path.exists(cached):
+                    config = load_config(args.robot, run_overrides(
+                        seed, args.speed, args.acceleration, {**CONDITIONS[condition],
+                                                              **(extra or {})}))
+                    try:
+                        rec = load_recording(cached, args.robot, condition, seed, config)
+                    except (OSError, ValueError, KeyError) as exc:
+                        print(f"{cached}: unreadable ({exc}), simulating the run again",
+                              file=sys.stderr)
+                if rec is None:
+                    rec = record_run(args.robot, condition, seed, args.duration,
+                                     speed=args.speed, acceleration=args.acceleration,
+                                     overrides=extra)
+                    if cached:
+                        save_recording(rec, cached)
             except ConfigError as exc:      # e.g. per-wheel radii on a DDROT
                 print(f"{condition}: skipped for {args.robot} ({exc})", file=sys.stderr)
                 break
