@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from holonomic_core import hot_path
-from holonomic_core.se2 import compose_arc, wrap_angle
+from holonomic_core.se2 import compose_arc, rotate, wrap_angle
 
 
 @dataclass(frozen=True)
@@ -156,8 +156,7 @@ class Odometry:
         lat = self.noise.latency_variance
         if lat > 0.0:
             vx, vy, wz = self.twist.tolist()
-            c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
-            u = np.array([c * vx - s * vy, s * vx + c * vy, wz])
+            u = np.array([*rotate(vx, vy, float(self.pose[2])), wz])
             P += lat * np.outer(u, u)
         return P
 
