@@ -235,6 +235,8 @@ def worker(job_file: str) -> int:
     import pytest  # noqa: F401  (preloaded above; used in the child)
 
     target = work / job["path"]
+    # src/<package>/<package>/<module>.py -> <package>.<module>
+    module_name = ".".join(Path(job["path"]).with_suffix("").parts[2:])
     original = target.read_text()
     out = open(job["results"], "a")
 
@@ -247,6 +249,12 @@ def worker(job_file: str) -> int:
                 devnull = os.open(os.devnull, os.O_WRONLY)
                 os.dup2(devnull, 1)
                 os.dup2(devnull, 2)
+                try:
+                    # a mutant that breaks the import is killed (given node
+                    # ids, pytest would report that as "not found", exit 4)
+                    importlib.import_module(module_name)
+                except BaseException:
+                    os._exit(2)
                 code = pytest.main([*PYTEST, "-x", "-W", "ignore", *tests])
             except BaseException:
                 code = 3
@@ -262,7 +270,8 @@ def worker(job_file: str) -> int:
             time.sleep(0.005)
         code = os.waitstatus_to_exitcode(status)
         # 1 tests failed, 2 collection error (the mutant broke the import),
-        # 3 internal error; negative: killed by a signal (e.g. a crash)
+        # 3 internal error; negative: killed by a signal (e.g. a crash);
+        # 4 or 5: a selected test was not found (none ran): not a kill
         verdict = ("survived" if code == 0 else "error" if code in (4, 5) else "killed")
         return verdict, code, time.monotonic() - started
 

@@ -181,3 +181,46 @@ def test_loop_stats_window_default_and_partial_window_and_zero_periods():
     still = LoopStats(window=3)
     still.add(0.0, 0.0)
     assert still.summary()["rate_hz"] == 0.0
+
+
+def test_boundaries_and_counts_of_the_long_period_causes():
+    """By hand: "over 2 ms" means longer than 2 ms (a period of exactly
+    2 ms is on time); the first cycle has no previous cycle, so a long first
+    period can only be put down to its own lateness; each long period adds
+    one to its cause (two late wake-ups: 2); a cycle added without its
+    lateness woke on time (late 0). The wake-up lateness p99 over the
+    window by numpy's linear rule: of (0, 1.5, 2.5) ms, 1.5 + 0.98 * 1."""
+    stats = LoopStats(window=3)
+    stats.add(0.003, 0.0001, late=0.0015, cpu=0.0001)   # first: no previous compute
+    assert stats.over_2ms_causes == {"woke_late": 1, "compute": 0, "preempted": 0}
+    stats.add(0.002, 0.0001)                             # exactly 2 ms: not over
+    assert stats.over_2ms == 1                            # the first one only
+    stats.add(0.0035, 0.0001, late=0.0025)
+    s = stats.summary()
+    assert (s["over_2ms_woke_late"], s["over_2ms_compute"], s["over_2ms_preempted"]) == (2, 0, 0)
+    assert s["periods_over_2ms"] == 2
+    assert s["wake_late_max_ms"] == pytest.approx(2.5)
+    assert s["wake_late_p99_ms"] == pytest.approx(1.5 + 0.98 * 1.0)
+    on_time = LoopStats()
+    on_time.add(0.001, 0.0002)
+    assert on_time.summary()["wake_late_max_ms"] == 0.0
+
+
+def test_loop_parameters_defaults_and_ranges():
+    """The loop's parameters as the README tables give them: a loop process
+    of its own with real-time priority by default, SCHED_FIFO priorities
+    1-98, and a 2 s watchdog within 0.01-60 s."""
+    from holonomic_core.loop import LOOP_SPECS
+    from holonomic_core.realtime import DEFAULT_PRIORITY
+    from holonomic_core.schema import ConfigError, validate
+
+    defaults = validate(LOOP_SPECS, {})
+    assert defaults == {"loop.process": True, "loop.realtime": True,
+                        "loop.priority": DEFAULT_PRIORITY, "loop.watchdog_timeout": 2.0}
+    for key, good, bad in (("loop.priority", (1, 98), (0, 99)),
+                           ("loop.watchdog_timeout", (0.01, 60.0), (0.005, 60.5))):
+        for value in good:
+            assert validate(LOOP_SPECS, {key: value})[key] == value
+        for value in bad:
+            with pytest.raises(ConfigError):
+                validate(LOOP_SPECS, {key: value})
