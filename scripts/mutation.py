@@ -23,10 +23,11 @@ mutations and counts the same way, but
   imported afresh in each child, so the child sees the mutated file);
 * stops at the first failing test (-x).
 
-Mutations of plain string literals are off: mutmut turns "text" into
-"XXtextXX", and in these modules such literals are mostly messages that the
-tests check by substring, or keys and names whose mutation fails with a
-KeyError anyway. (f-strings are still mutated.)
+Mutations of string literals and f-strings are off: mutmut turns "text"
+into "XXtextXX", and in these modules such literals are mostly messages that
+the tests check by substring (which still matches), or keys and names whose
+mutation fails with a KeyError anyway. The expressions inside an f-string
+(a number a message reports) are still mutated.
 
 Mutants that no behaviour can tell apart from the original ("equivalent") are
 listed, each with its reason, in scripts/mutation_equivalent.yaml; the score
@@ -34,14 +35,17 @@ leaves them out: killed / (tested - equivalent).
 
 Usage (from the repository, with ros2_ws/env.sh sourced; `make mutation`):
     python scripts/mutation.py [--budget MINUTES] [MODULE ...]   # default: every module
-Prints a table per module and writes the diff of every surviving mutant to
-out/mutation/<module>.txt.
+    python scripts/mutation.py --again MODULE ...   # after adding tests: the survivors only
+Prints a table per module, writes the diff of every surviving mutant to
+out/mutation/<module>.txt and the killed ones to out/mutation/<module>.json
+(what --again starts from).
 """
 
 from __future__ import annotations
 
 import argparse
 import difflib
+import hashlib
 import json
 import os
 import shutil
@@ -139,7 +143,7 @@ def mutants(source: str, filename: str) -> list[dict]:
 
     # mutmut reads only these two fields of its Config while mutating
     config = SimpleNamespace(covered_lines_by_filename=None,
-                             mutation_types_to_apply=set(mutmut.mutations_by_type) - {"string"})
+                             mutation_types_to_apply=set(mutmut.mutations_by_type) - {"string", "fstring"})
     listing = mutmut.Context(source=source, filename=filename, config=config)
     found = []
     for mid in mutmut.list_mutations(listing):
@@ -297,7 +301,8 @@ def worker(job_file: str) -> int:
 
 # -- one module --------------------------------------------------------------
 
-def run_module(work: Path, name: str, out: Path, budget: float | None) -> dict:
+def run_module(work: Path, name: str, out: Path, budget: float | None,
+               again: bool = False) -> dict:
     path, tests = MODULES[name]
     started = time.monotonic()
     env = scratch_env(work)
@@ -310,10 +315,25 @@ def run_module(work: Path, name: str, out: Path, budget: float | None) -> dict:
     every_test = set().union(*by_line.values()) - {""}
     results: dict[int, dict] = {}
     job_mutants = []
+    record_file = out / f"{name}.json"
+    digest = hashlib.sha256(source.encode()).hexdigest()
+    before = {}
+    if again and record_file.exists():
+        record = json.loads(record_file.read_text())
+        if record["sha256"] == digest:
+            before = {tuple(k): v for k, v in record["killed"]}
+        else:
+            print(f"mutation: {path} changed since the last run: all of it again",
+                  file=sys.stderr)
     for number, item in enumerate(found):
         item["id"] = number
         covering = by_line.get(item["line"], set())
-        if not covering:
+        key = (item["line"], item["index"], item["mutated"])
+        if key in before:
+            # killed in the last run of this same source: added tests cannot
+            # revive it (tests that were changed or removed need a full run)
+            results[number] = {"status": before[key], "again": True}
+        elif not covering:
             results[number] = {"status": "survived", "why": "no test runs this line"}
         else:
             # a line run at import can change what any test of the module sees
@@ -342,6 +362,11 @@ def run_module(work: Path, name: str, out: Path, budget: float | None) -> dict:
         for line in results_file.read_text().splitlines():
             row = json.loads(line)
             results[row["id"]] = row
+    record_file.write_text(json.dumps({
+        "sha256": digest, "killed": [
+            [[item["line"], item["index"], item["mutated"]], results[item["id"]]["status"]]
+            for item in found if results.get(item["id"], {}).get("status") in ("killed",
+                                                                              "timeout")]}))
     listed = load_equivalent().get(name, [])
     counts = {k: 0 for k in ("killed", "timeout", "error", "survived", "equivalent",
                              "not run")}
@@ -370,6 +395,10 @@ def main(argv=None) -> int:
                         help=f"some of {', '.join(MODULES)} (default: all)")
     parser.add_argument("--budget", type=float, default=None, metavar="MINUTES",
                         help="stop each module after this long (the rest: not run)")
+    parser.add_argument("--again", action="store_true",
+                        help="run only the mutants the last run of each module did not kill "
+                             "(out/mutation/<module>.json), when its source is unchanged: after "
+                             "adding tests")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
@@ -391,7 +420,7 @@ def main(argv=None) -> int:
     try:
         for name in modules:
             budget = None if args.budget is None else 60.0 * args.budget
-            c = run_module(work, name, out, budget)
+            c = run_module(work, name, out, budget, args.again)
             caught = c["killed"] + c["timeout"]
             counted = caught + c["survived"] + c["error"]
             score = 100.0 * caught / counted if counted else 100.0

@@ -46,6 +46,10 @@ def test_odrive_ids_and_enumerations_are_the_firmwares():
     assert {m.name: m.value for m in proto.InputMode} == {
         "INACTIVE": 0, "PASSTHROUGH": 1, "VEL_RAMP": 2}
     assert proto.MAX_NODE_ID == 63                      # 6 bits above the 5-bit command
+    # firmware 0.6 reserves node id 0x3F for broadcast and discovery (ODrive's
+    # CAN protocol docs), so an axis there gets at most 62; 0.5 allows all 6 bits
+    assert proto.BROADCAST_NODE_ID == 0x3F
+    assert proto.max_node_id("0.5") == 63 and proto.max_node_id("0.6") == 62
     assert proto.error_names(0x1000000 | 0x2000000) == "WATCHDOG_TIMER_EXPIRED|ESTOP_REQUESTED"
     assert proto.error_names(0x4 | 0x8) == "TIMING_ERROR|MISSING_ESTIMATE"
     assert proto.error_names(0x1 | 0x2) == "INITIALIZING|SYSTEM_LEVEL"
