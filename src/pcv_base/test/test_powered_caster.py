@@ -296,3 +296,49 @@ def test_constructor_rejects_fewer_than_two_casters_and_zero_offset():
     with pytest.raises(ConfigError, match="not be holonomic|not\\s+be holonomic"):
         PoweredCasterKinematics([Caster("a", 0.2, 0.0, 0.05, 0.0),
                                  Caster("b", 0.2, math.pi, 0.05, 0.02)])
+
+
+def test_steering_axes_no_further_apart_than_the_two_offsets_are_refused():
+    """By hand: casters b and c have their steering axes at (0, 0.1) and
+    (0, -0.1), 0.2 m apart; with offsets b = 0.1 m each the circles their
+    contact points move on touch (0.2 <= 0.1 + 0.1), so the wheels can meet:
+    refused, naming the later caster's h, the bound and the distance. They
+    are the 2nd and 3rd of three casters: every pair is checked. Offsets of
+    0.099 m leave 2 mm between the circles: accepted."""
+    def three(b):
+        return [Caster("a", 0.3, 0.0, 0.05, b), Caster("b", 0.1, math.pi / 2, 0.05, b),
+                Caster("c", 0.1, -math.pi / 2, 0.05, b)]
+
+    with pytest.raises(ConfigError) as info:
+        PoweredCasterKinematics(three(0.1))
+    assert info.value.key == "pcv.c.h"
+    assert "more than b_b + b_c = 0.2 m from caster b's (it is 0.2 m" in str(info.value)
+    assert len(PoweredCasterKinematics(three(0.099)).casters) == 3
+
+
+def test_steering_axis_at_the_origin_is_valid_and_an_infinite_one_is_not():
+    """h = 0 (a caster under the base_link origin) is a valid geometry (the
+    check is h >= 0); h = inf or beta = nan is refused, naming the key."""
+    kin = PoweredCasterKinematics([Caster("a", 0.0, 0.0, 0.05, 0.02),
+                                   Caster("b", 0.3, math.pi, 0.05, 0.02)])
+    assert kin.caster_names == ("a", "b")
+    for h, beta in ((math.inf, 0.0), (0.3, math.nan)):
+        with pytest.raises(ConfigError) as info:
+            PoweredCasterKinematics([Caster("a", 0.0, 0.0, 0.05, 0.02),
+                                     Caster("b", h, beta, 0.05, 0.02)])
+        assert info.value.key == "pcv.b.h"
+
+
+def test_joint_slices_and_frozen_caster_geometry():
+    """Joint order (steer, wheel) per caster: the steering joints are the even
+    entries, the wheels the odd ones. A Caster cannot be changed after the
+    kinematics copied its numbers (it is frozen)."""
+    import dataclasses
+
+    kin = PoweredCasterKinematics([Caster("a", 0.3, 0.0, 0.05, 0.02),
+                                   Caster("b", 0.3, math.pi, 0.05, 0.02)])
+    q = np.array([0.1, 5.0, 0.2, 6.0])
+    np.testing.assert_array_equal(q[kin.steer_indices], [0.1, 0.2])
+    np.testing.assert_array_equal(q[kin.wheel_indices], [5.0, 6.0])
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        kin.casters[0].h = 0.5
