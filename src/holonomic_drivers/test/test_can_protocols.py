@@ -178,6 +178,10 @@ def test_canopen_identifiers_and_indices_are_the_standards():
         "BOOT_UP": 0x00, "STOPPED": 0x04, "OPERATIONAL": 0x05, "PRE_OPERATIONAL": 0x7F}
     assert (co.DEVICE_TYPE, co.ERROR_REGISTER, co.CONSUMER_HEARTBEAT_TIME,
             co.PRODUCER_HEARTBEAT_TIME) == (0x1000, 0x1001, 0x1016, 0x1017)
+    # node guarding (CiA 301): guard time and life time factor
+    assert (co.GUARD_TIME, co.LIFE_TIME_FACTOR) == (0x100C, 0x100D)
+    # CiA 402 factor group: SI unit of velocity, gear ratio, feed constant
+    assert (co.SI_UNIT_VELOCITY, co.GEAR_RATIO, co.FEED_CONSTANT) == (0x60A9, 0x6091, 0x6092)
     assert (co.RPDO_COMM, co.RPDO_MAP, co.TPDO_COMM, co.TPDO_MAP) == (0x1400, 0x1600, 0x1800,
                                                                       0x1A00)
     assert (co.ERROR_CODE, co.CONTROLWORD, co.STATUSWORD, co.QUICK_STOP_OPTION,
