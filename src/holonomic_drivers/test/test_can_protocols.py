@@ -224,6 +224,17 @@ def test_statusword_decoding_and_power_state_machine():
     assert co.state_of(0x0233) is State.SWITCHED_ON
     assert co.state_of(0x0217) is State.QUICK_STOP_ACTIVE
     assert co.state_of(0x021F) is State.FAULT_REACTION_ACTIVE
+    assert co.state_of(0x0218) is State.FAULT
+    # statusword bits (CiA 402): 3 fault, 4 voltage enabled, 9 remote
+    assert (co.STATUS_FAULT_BIT, co.STATUS_VOLTAGE_ENABLED, co.STATUS_REMOTE) == (
+        0x0008, 0x0010, 0x0200)
+    # bit 4 (voltage enabled) is not part of any state's pattern: each state
+    # reads back from the word a drive reports in it, with or without voltage
+    # (READY TO SWITCH ON without voltage: 0x21 with the remote bit 9)
+    assert co.statusword_of(State.READY_TO_SWITCH_ON, voltage=False) == 0x0221
+    for state in State:
+        for voltage in (True, False):
+            assert co.state_of(co.statusword_of(state, voltage)) is state, (state, voltage)
     state = State.SWITCH_ON_DISABLED
     for word, expected in ((Control.SHUTDOWN, State.READY_TO_SWITCH_ON),
                            (Control.SWITCH_ON, State.SWITCHED_ON),
