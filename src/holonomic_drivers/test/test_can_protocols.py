@@ -245,6 +245,13 @@ def test_statusword_decoding_and_power_state_machine():
                            (Control.DISABLE_VOLTAGE, State.SWITCH_ON_DISABLED)):
         state = co.next_state(state, word, 0)
         assert state is expected
+    # the commands are bit patterns with don't-care bits (CiA 402 device control
+    # commands): quick stop is bit 2 = 0, bit 1 = 1, bit 7 = 0, whatever bit 0
+    # says (0x0003); disable voltage is bit 1 = 0, bit 7 = 0, whatever bits 0
+    # and 2 say (0x0001, 0x0005)
+    assert co.next_state(State.OPERATION_ENABLED, 0x0003, 0) is State.QUICK_STOP_ACTIVE
+    assert co.next_state(State.QUICK_STOP_ACTIVE, 0x0001, 0) is State.SWITCH_ON_DISABLED
+    assert co.next_state(State.OPERATION_ENABLED, 0x0005, 0) is State.SWITCH_ON_DISABLED
     # enable operation is not a legal jump out of SWITCH ON DISABLED
     assert co.next_state(State.SWITCH_ON_DISABLED, Control.ENABLE_OPERATION, 0) \
         is State.SWITCH_ON_DISABLED
