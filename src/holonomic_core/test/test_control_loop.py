@@ -224,3 +224,46 @@ def test_loop_parameters_defaults_and_ranges():
         for value in bad:
             with pytest.raises(ConfigError):
                 validate(LOOP_SPECS, {key: value})
+
+
+def test_stop_before_start_and_from_inside_a_cycle():
+    """stop() on a loop never started is a no-op that reports stopped; a
+    step may stop its own loop (no join of the loop's own thread): the loop
+    ends after that cycle."""
+    idle = ControlLoop(0.002, lambda: None)
+    assert idle.stop() is True and not idle.running
+    cycles = []
+    results = []
+
+    def step():
+        cycles.append(1)
+        if len(cycles) == 3:
+            results.append(loop.stop())
+
+    loop = ControlLoop(0.002, step)
+    loop.start()
+    deadline = time.monotonic() + 30.0
+    while loop.running and time.monotonic() < deadline:
+        time.sleep(0.01)                          # poll: the loop ends by itself
+    assert not loop.running
+    assert cycles == [1, 1, 1]
+    # from inside, the thread is still alive when stop() returns
+    assert results == [False]
+
+
+def test_a_process_that_does_not_stop_its_loop_still_exits():
+    """The loop thread is a daemon: a program that returns without stopping
+    its loop (e.g. after an exception) exits instead of hanging."""
+    import subprocess
+    import sys
+
+    code = ("import time\n"
+            "from holonomic_core.loop import ControlLoop\n"
+            "loop = ControlLoop(0.01, lambda: None)\n"
+            "loop.start()\n"
+            "while loop.stats.count < 2:\n"
+            "    time.sleep(0.01)\n"
+            "print('returning')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=30)
+    assert done.returncode == 0 and done.stdout == "returning\n", done.stderr
