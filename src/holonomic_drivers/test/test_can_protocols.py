@@ -178,6 +178,12 @@ def test_canopen_identifiers_and_indices_are_the_standards():
         "BOOT_UP": 0x00, "STOPPED": 0x04, "OPERATIONAL": 0x05, "PRE_OPERATIONAL": 0x7F}
     assert (co.DEVICE_TYPE, co.ERROR_REGISTER, co.CONSUMER_HEARTBEAT_TIME,
             co.PRODUCER_HEARTBEAT_TIME) == (0x1000, 0x1001, 0x1016, 0x1017)
+    # SDO abort codes (CiA 301): object / sub-index does not exist, write to a
+    # read-only object, value range exceeded, not in the present device
+    # state, command specifier not valid
+    assert (co.ABORT_NO_OBJECT, co.ABORT_NO_SUBINDEX, co.ABORT_READ_ONLY, co.ABORT_RANGE,
+            co.ABORT_STATE, co.ABORT_UNSUPPORTED) == (
+        0x06020000, 0x06090011, 0x06010002, 0x06090030, 0x08000022, 0x05040001)
     # node guarding (CiA 301): guard time and life time factor
     assert (co.GUARD_TIME, co.LIFE_TIME_FACTOR) == (0x100C, 0x100D)
     # CiA 402 factor group: SI unit of velocity, gear ratio, feed constant
@@ -252,6 +258,9 @@ def test_statusword_decoding_and_power_state_machine():
     assert co.next_state(State.OPERATION_ENABLED, 0x0003, 0) is State.QUICK_STOP_ACTIVE
     assert co.next_state(State.QUICK_STOP_ACTIVE, 0x0001, 0) is State.SWITCH_ON_DISABLED
     assert co.next_state(State.OPERATION_ENABLED, 0x0005, 0) is State.SWITCH_ON_DISABLED
+    # a drive in FAULT leaves it only by a fault reset, which the caller
+    # handles: a disable-voltage word (0x0000) keeps it in FAULT
+    assert co.next_state(State.FAULT, 0x0000, 0) is State.FAULT
     # enable operation is not a legal jump out of SWITCH ON DISABLED
     assert co.next_state(State.SWITCH_ON_DISABLED, Control.ENABLE_OPERATION, 0) \
         is State.SWITCH_ON_DISABLED
