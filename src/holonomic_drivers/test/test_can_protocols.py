@@ -54,6 +54,12 @@ def test_odrive_ids_and_enumerations_are_the_firmwares():
     assert proto.error_names(0x4 | 0x8) == "TIMING_ERROR|MISSING_ESTIMATE"
     assert proto.error_names(0x1 | 0x2) == "INITIALIZING|SYSTEM_LEVEL"
     assert proto.error_names(0) == "none"
+    # firmware 0.5's Axis.Error bits (its axis.hpp): the same bits name
+    # other errors on 0.6
+    for bit, name in ((0x1, "INVALID_STATE"), (0x40, "MOTOR_FAILED"),
+                      (0x80, "SENSORLESS_ESTIMATOR_FAILED"), (0x100, "ENCODER_FAILED"),
+                      (0x200, "CONTROLLER_FAILED"), (0x800, "WATCHDOG_TIMER_EXPIRED")):
+        assert proto.error_names(bit, "0.5") == name
 
 
 def test_odrive_host_commands_are_encoded_byte_for_byte():
@@ -219,6 +225,11 @@ def test_sdo_expedited_frames_byte_for_byte():
     assert co.sdo_abort(0x6060, 0, co.ABORT_RANGE) == H("80 60 60 00 30 00 09 06")
     assert co.emcy(0x2310) == H("10 23 01 00 00 00 00 00")
     assert co.pdo_map_entry(0x60FF, 0, 32) == 0x60FF0020
+    # index (16 bits), sub-index (8 bits), length in bits (8 bits), CiA 301
+    assert co.pdo_map_entry(0x2000, 3, 8) == 0x20000308
+    # an expedited transfer carries 1 to 4 bytes: more needs a segmented one
+    with pytest.raises(ValueError, match="1..4 bytes"):
+        co.sdo_download_request(0x2000, 0, bytes(5))
 
 
 def test_statusword_decoding_and_power_state_machine():
