@@ -58,8 +58,16 @@ def test_odrive_ids_and_enumerations_are_the_firmwares():
     # other errors on 0.6
     for bit, name in ((0x1, "INVALID_STATE"), (0x40, "MOTOR_FAILED"),
                       (0x80, "SENSORLESS_ESTIMATOR_FAILED"), (0x100, "ENCODER_FAILED"),
-                      (0x200, "CONTROLLER_FAILED"), (0x800, "WATCHDOG_TIMER_EXPIRED")):
+                      (0x200, "CONTROLLER_FAILED"), (0x800, "WATCHDOG_TIMER_EXPIRED"),
+                      (0x1000, "MIN_ENDSTOP_PRESSED"), (0x2000, "MAX_ENDSTOP_PRESSED"),
+                      (0x4000, "ESTOP_REQUESTED"), (0x20000, "HOMING_WITHOUT_ENDSTOP"),
+                      (0x40000, "OVER_TEMP"), (0x80000, "UNKNOWN_POSITION")):
         assert proto.error_names(bit, "0.5") == name
+    # the bits the emulated axis raises are these names on each firmware
+    for firmware in proto.FIRMWARES:
+        assert proto.error_names(proto.WATCHDOG_TIMER_EXPIRED[firmware], firmware) == \
+            "WATCHDOG_TIMER_EXPIRED"
+        assert proto.error_names(proto.ESTOP_REQUESTED[firmware], firmware) == "ESTOP_REQUESTED"
 
 
 def test_odrive_host_commands_are_encoded_byte_for_byte():
