@@ -342,3 +342,32 @@ def test_joint_slices_and_frozen_caster_geometry():
     np.testing.assert_array_equal(q[kin.wheel_indices], [5.0, 6.0])
     with pytest.raises(dataclasses.FrozenInstanceError):
         kin.casters[0].h = 0.5
+
+
+@pytest.mark.parametrize("key, value, allowed", [
+    ("pcv.wheel_radius", 10.5, "(0, 10]"),
+    ("pcv.caster_offset", 10.5, "[0, 10]"),
+    ("pcv.front_left.h", 100.5, "[0, 100]"),
+    ("pcv.front_left.h", -0.1, "[0, 100]"),
+    ("pcv.front_left.beta", 10.5, "[-10, 10]"),
+    ("pcv.front_left.beta", -10.5, "[-10, 10]"),
+    ("pcv.front_left.wheel_radius", 0.0, "(0, 10]"),
+    ("pcv.front_left.wheel_radius", 10.5, "(0, 10]"),
+    ("pcv.front_left.caster_offset", 10.5, "[0, 10]"),
+])
+def test_geometry_out_of_range_is_refused_by_the_schema_with_its_range(key, value, allowed):
+    """The README's parameter ranges: lengths up to 10 m (h: 100 m), angles
+    within +-10 rad, radii open at 0; offsets closed at 0 so that b = 0
+    reaches the constructor's explanation."""
+    with pytest.raises(ConfigError) as info:
+        load_config("xr4000", {key: value})
+    assert info.value.key == key
+    assert f"expected a number in {allowed}" in str(info.value)
+
+
+def test_two_casters_are_enough():
+    """Two casters (4 constraints on 3 DOF) make a holonomic base: the
+    schema's minimum list length is 2."""
+    model = load_model("xr4000", {"pcv.casters": ["front_left", "rear_right"]})
+    assert model.joint_names == ("front_left_steer_joint", "front_left_wheel_joint",
+                                 "rear_right_steer_joint", "rear_right_wheel_joint")
