@@ -374,3 +374,24 @@ def test_cia402_driver_sends_the_scripted_frames():
                             (0x203, H("07 00 00 00 00 00")), (0x080, b"")]
     finally:
         rig.close()
+
+
+def test_odrive_0_5_heartbeat_carries_the_sub_object_error_flags():
+    """Firmware 0.5.x's heartbeat (ODrive CAN protocol docs of 0.5): bytes
+    0-3 axis error, byte 4 axis state, then one byte each with the motor
+    (bit 40 of the payload), encoder (bit 48) and controller (bit 56) error
+    flags, and trajectory done in the last bit (63). So motor + encoder +
+    controller flags and trajectory done give the bytes 01 01 81."""
+    hb = proto.Heartbeat.decode(H("40 00 00 00 08 01 01 81"), "0.5")
+    assert (hb.axis_error, hb.axis_state, hb.trajectory_done) == (0x40, 8, True)
+    assert hb.error_flags == ("motor", "encoder", "controller")
+    assert hb.faulted
+    assert hb.describe("0.5") == "0x40 (MOTOR_FAILED), motor encoder controller error flag"
+    only_encoder = proto.Heartbeat(0, 8, 0, False, ("encoder",))
+    assert only_encoder.encode("0.5") == H("00 00 00 00 08 00 01 00")
+    # an error flag alone (axis error 0) is a fault; no flag and no error is not
+    assert only_encoder.faulted
+    healthy = proto.Heartbeat(0, 8, 0, True)
+    assert not healthy.faulted
+    assert healthy.encode("0.5") == H("00 00 00 00 08 00 00 80")
+    assert proto.Heartbeat.decode(healthy.encode("0.5"), "0.5") == healthy
