@@ -395,3 +395,14 @@ def test_odrive_0_5_heartbeat_carries_the_sub_object_error_flags():
     assert not healthy.faulted
     assert healthy.encode("0.5") == H("00 00 00 00 08 00 00 80")
     assert proto.Heartbeat.decode(healthy.encode("0.5"), "0.5") == healthy
+
+
+def test_odrive_0_6_heartbeat_of_seven_bytes_with_a_procedure_result():
+    """Firmware 0.6.x's heartbeat: bytes 0-3 axis error, byte 4 axis state,
+    byte 5 procedure result, byte 6 bit 0 trajectory done; the 8th byte is
+    reserved and may be left out. Here: procedure result 2, trajectory not
+    done."""
+    hb = proto.Heartbeat.decode(H("00 00 00 00 01 02 00"))
+    assert (hb.axis_error, hb.axis_state, hb.procedure_result, hb.trajectory_done) == (
+        0, 1, 2, False)
+    assert not hb.faulted

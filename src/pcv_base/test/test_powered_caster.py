@@ -281,6 +281,7 @@ def test_per_caster_values_override_the_shared_ones():
     ({"pcv.casters": ["front_left"]}, "pcv.casters"),
     ({"pcv.casters": ["front_left", "front_left"]}, "pcv.casters"),
     ({"pcv.casters": ["front left", "rear_left"]}, "pcv.casters"),
+    ({"pcv.casters": [1, 2]}, "pcv.casters"),          # not names: refused, no TypeError
     ({"pcv.front_left.h": 0.05, "pcv.front_left.beta": 0.0,
       "pcv.rear_left.h": 0.05, "pcv.rear_left.beta": 3.14159}, "pcv.rear_left.h"),
 ])
