@@ -267,3 +267,89 @@ def test_a_process_that_does_not_stop_its_loop_still_exits():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=30)
     assert done.returncode == 0 and done.stdout == "returning\n", done.stderr
+
+
+class _SimulatedTime:
+    """The loop's clocks and sleep, simulated: ``perf_counter`` [s] moves
+    only when a step computes or the loop sleeps; ``thread_time`` [s] moves
+    by the CPU share of each step. A sleep (``Event.wait``) ends exactly at
+    the deadline (the timeout plus the loop's 0.2 ms busy-wait tail) plus
+    any oversleep scripted for it. A clock read that never moves time on
+    (a busy-wait past the deadline) ends the run with an error instead of
+    spinning forever."""
+
+    def __init__(self, spin, oversleep):
+        self.now = 0.0
+        self.cpu = 0.0
+        self.spin = spin
+        self.oversleep = list(oversleep)
+        self.reads = 0
+        sim = self
+
+        class Event:
+            def __init__(self):
+                self.flag = False
+
+            def set(self):
+                self.flag = True
+
+            def is_set(self):
+                return self.flag
+
+            def wait(self, timeout):
+                sim.now += timeout + sim.spin + (sim.oversleep.pop(0) if sim.oversleep else 0.0)
+                sim.reads = 0
+                return self.flag
+
+        self.Event = Event
+        self.Thread = threading.Thread
+        self.current_thread = threading.current_thread
+
+    def perf_counter(self):
+        self.reads += 1
+        if self.reads > 1000:
+            raise RuntimeError("busy-waiting on a clock that does not move")
+        return self.now
+
+    def thread_time(self):
+        return self.cpu
+
+    def compute(self, wall, cpu):
+        self.now += wall
+        self.cpu += cpu
+        self.reads = 0
+
+
+def test_the_cycle_timing_on_simulated_clocks(monkeypatch):
+    """The pacing by hand, period 10 ms, deadlines t0 + k T from t0 = 0:
+    cycle 1 computes 1 ms and sleeps to 10 ms; cycle 2 computes 25 ms
+    (15 ms past its 20 ms deadline: more than a period, an overrun, the
+    deadlines re-anchor to 35 ms); cycle 3 starts at once (period 25 ms),
+    computes 1 ms (0.5 ms of it on the CPU: preempted 0.5 ms) and sleeps to
+    45 ms but wakes 3 ms late (period 13 ms, late 3 ms); cycle 4 computes
+    21 ms (ends at 69 ms, 14 ms past 55 ms: the second overrun); cycle 5
+    starts at once (period 21 ms) and stops the loop."""
+    import holonomic_core.loop as loop_module
+
+    sim = _SimulatedTime(spin=2e-4, oversleep=[0.0, 0.003])
+    monkeypatch.setattr(loop_module, "time", sim)
+    monkeypatch.setattr(loop_module, "threading", sim)
+    script = [(0.001, 0.001), (0.025, 0.025), (0.001, 0.0005), (0.021, 0.021), (0.001, 0.001)]
+    starts = []
+
+    def step():
+        starts.append(sim.now)
+        wall, cpu = script[len(starts) - 1]
+        sim.compute(wall, cpu)
+        if len(starts) == len(script):
+            loop.stop()
+
+    loop = ControlLoop(0.01, step)
+    loop.run()
+    np.testing.assert_allclose(starts, [0.0, 0.01, 0.035, 0.048, 0.069], atol=1e-12)
+    stats = loop.stats
+    assert stats.count == 4 and stats.overruns == 2
+    np.testing.assert_allclose(stats.periods[:4], [0.01, 0.025, 0.013, 0.021], atol=1e-12)
+    np.testing.assert_allclose(stats.compute[:4], [0.025, 0.001, 0.021, 0.001], atol=1e-12)
+    np.testing.assert_allclose(stats.late[:4], [0.0, 0.0, 0.003, 0.0], atol=1e-12)
+    assert stats.max_preempted == pytest.approx(0.0005, abs=1e-12)
