@@ -222,3 +222,14 @@ def test_a_zero_reading_timeout_disables_the_frozen_check():
     monitor = ReadingMonitor(["a"], [1.0], 0.005, MonitorLimits(3.0, 0.0, 0.3, 0.5))
     for k in range(100):                    # the same stamp for 0.5 s
         assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.0 + k * 0.005) is None
+
+
+def test_readings_frozen_for_exactly_the_timeout_are_not_yet_stale():
+    """Stale means frozen for longer than reading_timeout (0.5 s here): the
+    same stamp checked 0.5 s after it last changed is still accepted, 0.5 s
+    + one period later it is named (times chosen exact in binary)."""
+    monitor = ReadingMonitor(["a"], [1.0], 0.25, MonitorLimits(3.0, 0.5, 0.3, 0.5))
+    assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.0) is None
+    assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.5) is None
+    assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.75) == (
+        "joint readings stopped updating 0.750 s ago")
