@@ -387,3 +387,22 @@ def test_two_wheels_skidding_at_once_are_not_blamed_on_one():
     rates[5] += 0.3 / kin.r[2]
     np.testing.assert_array_equal(kin.forward(q, rates, "robust"),
                                   kin.forward(q, rates, "slip_min"))
+
+
+def test_each_estimators_residual_is_the_contact_slip_its_twist_leaves():
+    """By definition (eq. 10 inverted, eq. 11): the sensed contact velocities
+    u = C_q^-1 q_dot minus the rigid field C_p x of the estimator's twist x,
+    per caster the norm of its 2 rows [m/s]. Computed here with the
+    matrices, for joint rates with slip on every caster (so pinv's twist,
+    which weighs the rows differently, leaves a different residual)."""
+    rng = np.random.default_rng(7)
+    kin = load_model("xr4000").kinematics
+    q = rng.uniform(-math.pi, math.pi, 8)
+    rates = kin.inverse(q, np.array([0.3, 0.1, -0.4])) + rng.normal(0.0, 0.5, 8)
+    u = kin.joint_to_contact(q) @ rates
+    for estimator in ESTIMATORS:
+        twist, residual = kin.estimate(q, rates, estimator)
+        rows = u - kin.contact_jacobian(q) @ twist
+        expected = np.hypot(rows[0::2], rows[1::2])
+        np.testing.assert_allclose(residual, expected, rtol=1e-9, atol=1e-12)
+        assert np.all(residual > 1e-3)
