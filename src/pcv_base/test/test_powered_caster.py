@@ -406,3 +406,27 @@ def test_each_estimators_residual_is_the_contact_slip_its_twist_leaves():
         expected = np.hypot(rows[0::2], rows[1::2])
         np.testing.assert_allclose(residual, expected, rtol=1e-9, atol=1e-12)
         assert np.all(residual > 1e-3)
+
+
+def test_a_burst_two_casters_explain_equally_is_not_blamed_on_either():
+    """3 casters: the fit's residual space is 3-dimensional and a burst on
+    caster i leaves a residual in its plane (I - H) E_i (H = C_p C_p^+,
+    E_i: caster i's two rows). Two planes meet along a line; a burst of
+    0.5 m/s on caster 0 whose residual lies on the line it shares with
+    caster 1 is explained as well by caster 1's burst. Robust cannot tell
+    which caster slipped and keeps the slip_min twist exactly."""
+    kin = load_model("comr3").kinematics
+    q = np.array([0.4, 0.0, -1.1, 0.0, 2.2, 0.0])
+    cp = kin.contact_jacobian(q)
+    residual_space = np.eye(6) - cp @ np.linalg.pinv(cp)
+    planes = [residual_space[:, 2 * i:2 * i + 2] for i in range(3)]
+    # a0, b1 with planes[0] a0 = planes[1] b1: the null space of [P0, -P1]
+    null = np.linalg.svd(np.hstack((planes[0], -planes[1])))[2][-1]
+    burst = np.zeros(6)
+    burst[0:2] = null[:2] / np.linalg.norm(null[:2]) * 0.5
+    np.testing.assert_allclose(planes[0] @ null[:2], planes[1] @ null[2:], atol=1e-12)
+    twist = np.array([0.3, -0.1, 0.2])
+    rates = kin.contact_to_joint(q) @ (cp @ twist + burst)
+    slip_min = kin.forward(q, rates, "slip_min")
+    assert np.linalg.norm(slip_min - twist) > 0.05            # the burst moves slip_min
+    np.testing.assert_array_equal(kin.forward(q, rates, "robust"), slip_min)
