@@ -226,8 +226,10 @@ def test_non_zero_commands_while_disarmed_are_counted_and_reported_for_a_while()
     assert ctrl.counters["commands_while_disarmed"] == 1
     clock.t += 1.9
     assert ctrl.commanded_while_disarmed(2.0)   # the diagnostics' 2 s window
+    assert ctrl.status().commanded_while_disarmed
     clock.t += 0.2
     assert not ctrl.commanded_while_disarmed(2.0)
+    assert not ctrl.status().commanded_while_disarmed
     arm(ctrl, clock)
     ctrl.set_command((0.3, 0.0, 0.0))           # armed: the base follows, nothing to report
     assert ctrl.counters["commands_while_disarmed"] == 1
