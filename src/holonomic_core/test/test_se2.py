@@ -97,3 +97,16 @@ def test_yaw_of_a_quaternion_and_back():
     # a roll of 90 deg (about x) has no yaw: (sin 45, 0, 0, cos 45)
     assert se2.yaw_of_quaternion((math.sin(PI / 4), 0.0, 0.0, math.cos(PI / 4))) == \
         pytest.approx(0.0, abs=1e-12)
+
+
+def test_the_small_angle_arc_keeps_the_chord_to_the_last_digit():
+    """Below 1e-6 rad the arc uses the series of sin(t)/t and (1 - cos t)/t.
+    For t = 9e-7 rad and 1 m forward, the chord is (sin t / t, 2 sin^2(t/2)
+    / t) -- written without the cancellation of 1 - cos t -- i.e. x = 1 -
+    1.35e-13 m: the series must give it to a few 1e-16 m (a wrong t^2
+    coefficient is off by 2e-14 m or more)."""
+    t = 9e-7
+    x, y = se2.compose_arc((0.0, 0.0, 0.0), 1.0, 0.0, t)
+    assert abs(x - math.sin(t) / t) < 1e-15
+    # (b = t/2: the series drops t^3 / 24 = 3e-20 m)
+    assert abs(y - 2.0 * math.sin(0.5 * t) ** 2 / t) < 1e-19
