@@ -267,3 +267,25 @@ def test_a_zero_tracking_timeout_disables_the_tracking_check():
     for k in range(10):
         assert monitor.check(JointReading(1.0 + 0.25 * k, [0.0], [0.0], []), 1.0 + 0.25 * k,
                              np.array([2.0])) is None
+
+
+def test_tracking_timer_starts_when_armed_and_names_the_time():
+    """By hand, tracking error 0.25 of a 1 rad/s limit and a 0.5 s timeout,
+    checks every 0.25 s: while disarmed (no command) nothing is timed; armed
+    with 2 rad/s commanded and 0 measured the timer starts at the first
+    armed check (1.25 s) and the joint is named once it has not followed for
+    the whole timeout (at 1.75 s: 0.50 s). A joint exactly at the tracking
+    bound (1.75 of 2 rad/s: 0.25 off) follows, however long."""
+    limits = MonitorLimits(3.0, 0.5, 0.25, 0.5)
+    monitor = ReadingMonitor(["a"], [1.0], 0.25, limits)
+    assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.0, None) is None
+    for t in (1.25, 1.5):
+        assert monitor.check(JointReading(t, [0.0], [0.0], []), t, np.array([2.0])) is None
+    assert monitor.check(JointReading(1.75, [0.0], [0.0], []), 1.75, np.array([2.0])) == (
+        "a: cannot follow its command (2 rad/s commanded, 0 rad/s measured for 0.50 s): "
+        "motor saturated or blocked")
+    at_bound = ReadingMonitor(["a"], [1.0], 0.25, limits)
+    for k in range(8):
+        t = 1.0 + 0.25 * k
+        assert at_bound.check(JointReading(t, [0.4375 * k], [1.75], []), t,
+                              np.array([2.0])) is None
