@@ -154,7 +154,8 @@ def mutants(source: str, filename: str) -> list[dict]:
         context = mutmut.Context(source=source, filename=filename, mutation_id=mid, config=config)
         mutated, _ = mutmut.mutate(context)
         line = mutated.split("\n")[mid.line_number]
-        found.append({"line": mid.line_number + 1, "index": mid.index,
+        above = source.split("\n")[mid.line_number - 1] if mid.line_number else ""
+        found.append({"line": mid.line_number + 1, "index": mid.index, "above": above.strip(),
                       "original": mid.line.strip(), "mutated": line.strip(), "source": mutated})
     return found
 
@@ -170,8 +171,10 @@ def load_equivalent() -> dict[str, list[dict]]:
 
 def is_equivalent(mutant: dict, listed: list[dict]) -> dict | None:
     for entry in listed:
+        # "above": the line before it, where the line alone is ambiguous
         if entry["line"].strip() == mutant["original"] and \
-                entry["mutant"].strip() == mutant["mutated"]:
+                entry["mutant"].strip() == mutant["mutated"] and \
+                entry.get("above", mutant["above"]).strip() == mutant["above"]:
             return entry
     return None
 
