@@ -154,9 +154,15 @@ def mutants(source: str, filename: str) -> list[dict]:
         context = mutmut.Context(source=source, filename=filename, mutation_id=mid, config=config)
         mutated, _ = mutmut.mutate(context)
         line = mutated.split("\n")[mid.line_number]
-        above = source.split("\n")[mid.line_number - 1] if mid.line_number else ""
-        found.append({"line": mid.line_number + 1, "index": mid.index, "above": above.strip(),
-                      "original": mid.line.strip(), "mutated": line.strip(), "source": mutated})
+        # what a reader sees: the first line that differs (mutmut's own line
+        # is the last line of a multi-line statement)
+        old_lines, new_lines = source.split("\n"), mutated.split("\n")
+        first = next(i for i, (a, b) in enumerate(zip(old_lines, new_lines)) if a != b)
+        found.append({"line": mid.line_number + 1, "index": mid.index,
+                      # (line, index, mutated): the key of a result in the record
+                      "mutated": line.strip(), "source": mutated,
+                      "shown": (old_lines[first - 1].strip() if first else "",
+                                old_lines[first].strip(), new_lines[first].strip())})
     return found
 
 
@@ -172,9 +178,9 @@ def load_equivalent() -> dict[str, list[dict]]:
 def is_equivalent(mutant: dict, listed: list[dict]) -> dict | None:
     for entry in listed:
         # "above": the line before it, where the line alone is ambiguous
-        if entry["line"].strip() == mutant["original"] and \
-                entry["mutant"].strip() == mutant["mutated"] and \
-                entry.get("above", mutant["above"]).strip() == mutant["above"]:
+        above, line, mutated = mutant["shown"]
+        if entry["line"].strip() == line and entry["mutant"].strip() == mutated and \
+                entry.get("above", above).strip() == above:
             return entry
     return None
 
