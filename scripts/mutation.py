@@ -153,7 +153,8 @@ def mutants(source: str, filename: str) -> list[dict]:
     for mid in mutmut.list_mutations(listing):
         context = mutmut.Context(source=source, filename=filename, mutation_id=mid, config=config)
         mutated, _ = mutmut.mutate(context)
-        line = mutated.split("\n")[mid.line_number]
+        lines = mutated.split("\n")
+        line = lines[mid.line_number] if mid.line_number < len(lines) else ""
         # what a reader sees: the first line that differs (mutmut's own line
         # is the last line of a multi-line statement)
         old_lines, new_lines = source.split("\n"), mutated.split("\n")
