@@ -430,3 +430,15 @@ def test_a_burst_two_casters_explain_equally_is_not_blamed_on_either():
     slip_min = kin.forward(q, rates, "slip_min")
     assert np.linalg.norm(slip_min - twist) > 0.05            # the burst moves slip_min
     np.testing.assert_array_equal(kin.forward(q, rates, "robust"), slip_min)
+
+
+def test_only_the_slip_min_fit_has_a_compiled_form():
+    """The compiled hot path covers the slip_min fit (per caster sx, sy, b,
+    r); robust and pinv stay in Python, so they get no compiled geometry."""
+    from holonomic_core import hot_path
+
+    kin = load_model("xr4000").kinematics
+    kind, geometry = kin.hot_path_geometry("slip_min")
+    assert kind == hot_path.KIND_PCV
+    np.testing.assert_array_equal(geometry, np.ravel(kin.contact_geometry))
+    assert kin.hot_path_geometry("robust") is None and kin.hot_path_geometry("pinv") is None
