@@ -232,6 +232,8 @@ def test_sdo_expedited_frames_byte_for_byte():
     assert co.sdo_download_response(0x6040, 0) == H("60 40 60 00 00 00 00 00")
     assert co.sdo_abort(0x6060, 0, co.ABORT_RANGE) == H("80 60 60 00 30 00 09 06")
     assert co.emcy(0x2310) == H("10 23 01 00 00 00 00 00")
+    # an EMCY frame is 8 bytes: the vendor field is cut to its 5
+    assert co.emcy(0x2310, 0x01, bytes(range(1, 7))) == H("10 23 01 01 02 03 04 05")
     assert co.pdo_map_entry(0x60FF, 0, 32) == 0x60FF0020
     # index (16 bits), sub-index (8 bits), length in bits (8 bits), CiA 301
     assert co.pdo_map_entry(0x2000, 3, 8) == 0x20000308
@@ -277,6 +279,11 @@ def test_statusword_decoding_and_power_state_machine():
     assert co.next_state(State.OPERATION_ENABLED, 0x0003, 0) is State.QUICK_STOP_ACTIVE
     assert co.next_state(State.QUICK_STOP_ACTIVE, 0x0001, 0) is State.SWITCH_ON_DISABLED
     assert co.next_state(State.OPERATION_ENABLED, 0x0005, 0) is State.SWITCH_ON_DISABLED
+    # disable voltage or quick stop from the two "voltage enabled, not
+    # operating" states ends in SWITCH ON DISABLED
+    assert co.next_state(State.READY_TO_SWITCH_ON, Control.DISABLE_VOLTAGE, 0) \
+        is State.SWITCH_ON_DISABLED
+    assert co.next_state(State.SWITCHED_ON, Control.QUICK_STOP, 0) is State.SWITCH_ON_DISABLED
     # a drive in FAULT leaves it only by a fault reset, which the caller
     # handles: a disable-voltage word (0x0000) keeps it in FAULT
     assert co.next_state(State.FAULT, 0x0000, 0) is State.FAULT
