@@ -413,3 +413,16 @@ def test_odrive_0_6_heartbeat_of_seven_bytes_with_a_procedure_result():
     assert (hb.axis_error, hb.axis_state, hb.procedure_result, hb.trajectory_done) == (
         0, 1, 2, False)
     assert not hb.faulted
+
+
+def test_odrive_error_status_and_an_unfinished_0_5_trajectory():
+    """Get_Error (0x03) on 0.6: active_errors and disarm_reason, two
+    little-endian u32; anything but 8 bytes is refused. A 0.5 heartbeat with
+    the top bit (63) clear: trajectory not done."""
+    status = proto.ErrorStatus.decode(H("00 00 00 01 20 00 00 00"))
+    assert (status.active_errors, status.disarm_reason) == (0x1000000, 0x20)
+    assert status.encode() == H("00 00 00 01 20 00 00 00")
+    with pytest.raises(ValueError, match="8 expected"):
+        proto.ErrorStatus.decode(H("00 00 00 01 20 00 00"))
+    moving = proto.Heartbeat.decode(H("00 00 00 00 08 00 01 00"), "0.5")
+    assert moving.trajectory_done is False and moving.error_flags == ("encoder",)
