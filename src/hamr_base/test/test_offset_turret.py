@@ -152,13 +152,25 @@ def test_invalid_geometry_is_rejected_naming_the_parameter(key, kwargs):
     assert ("not holonomic" in str(err.value)) == (key == "ddrot.turret_offset")
 
 
-@pytest.mark.parametrize("key, value", [("ddrot.wheel_radius", 100.5),       # over 100 m
-                                        ("body.drive_base.mass", 0.0)])      # not > 0
-def test_geometry_out_of_range_is_refused_by_the_schema(key, value):
+@pytest.mark.parametrize("key, value, allowed", [
+    ("ddrot.wheel_radius", 100.5, "(0, 100]"),                 # over 100 m
+    ("body.drive_base.mass", 0.0, None),                       # not > 0
+    # a wheel of radius 0 is refused by the schema, whose message gives the
+    # open lower bound, not later by the constructor
+    ("ddrot.wheel_radius", 0.0, "(0, 100]"),
+    ("ddrot.left_wheel_radius", 0.0, "(0, 100]"),
+    ("ddrot.half_wheel_separation", 0.0, "(0, 100]"),
+    # b = 0 passes the schema (closed lower bound) for the constructor to
+    # explain; over 100 m it is refused like the other lengths
+    ("ddrot.turret_offset", 100.5, "[0, 100]"),
+])
+def test_geometry_out_of_range_is_refused_by_the_schema(key, value, allowed):
     from holonomic_core.config import load_config
     with pytest.raises(ConfigError) as err:
         load_config("hamr", {key: value})
     assert err.value.key == key
+    if allowed is not None:
+        assert f"expected a number in {allowed}" in str(err.value)
 
 
 def test_estimate_is_exact_with_an_empty_read_only_residual(kin):

@@ -181,3 +181,169 @@ def test_loop_stats_window_default_and_partial_window_and_zero_periods():
     still = LoopStats(window=3)
     still.add(0.0, 0.0)
     assert still.summary()["rate_hz"] == 0.0
+
+
+def test_boundaries_and_counts_of_the_long_period_causes():
+    """By hand: "over 2 ms" means longer than 2 ms (a period of exactly
+    2 ms is on time); the first cycle has no previous cycle, so a long first
+    period can only be put down to its own lateness; each long period adds
+    one to its cause (two late wake-ups: 2); a cycle added without its
+    lateness woke on time (late 0). The wake-up lateness p99 over the
+    window by numpy's linear rule: of (0, 1.5, 2.5) ms, 1.5 + 0.98 * 1."""
+    stats = LoopStats(window=3)
+    stats.add(0.003, 0.0001, late=0.0015, cpu=0.0001)   # first: no previous compute
+    assert stats.over_2ms_causes == {"woke_late": 1, "compute": 0, "preempted": 0}
+    stats.add(0.002, 0.0001)                             # exactly 2 ms: not over
+    assert stats.over_2ms == 1                            # the first one only
+    stats.add(0.0035, 0.0001, late=0.0025)
+    s = stats.summary()
+    assert (s["over_2ms_woke_late"], s["over_2ms_compute"], s["over_2ms_preempted"]) == (2, 0, 0)
+    assert s["periods_over_2ms"] == 2
+    assert s["wake_late_max_ms"] == pytest.approx(2.5)
+    assert s["wake_late_p99_ms"] == pytest.approx(1.5 + 0.98 * 1.0)
+    on_time = LoopStats()
+    on_time.add(0.001, 0.0002)
+    assert on_time.summary()["wake_late_max_ms"] == 0.0
+
+
+def test_loop_parameters_defaults_and_ranges():
+    """The loop's parameters as the README tables give them: a loop process
+    of its own with real-time priority by default, SCHED_FIFO priorities
+    1-98, and a 2 s watchdog within 0.01-60 s."""
+    from holonomic_core.loop import LOOP_SPECS
+    from holonomic_core.realtime import DEFAULT_PRIORITY
+    from holonomic_core.schema import ConfigError, validate
+
+    defaults = validate(LOOP_SPECS, {})
+    assert defaults == {"loop.process": True, "loop.realtime": True,
+                        "loop.priority": DEFAULT_PRIORITY, "loop.watchdog_timeout": 2.0}
+    for key, good, bad in (("loop.priority", (1, 98), (0, 99)),
+                           ("loop.watchdog_timeout", (0.01, 60.0), (0.005, 60.5))):
+        for value in good:
+            assert validate(LOOP_SPECS, {key: value})[key] == value
+        for value in bad:
+            with pytest.raises(ConfigError):
+                validate(LOOP_SPECS, {key: value})
+
+
+def test_stop_before_start_and_from_inside_a_cycle():
+    """stop() on a loop never started is a no-op that reports stopped; a
+    step may stop its own loop (no join of the loop's own thread): the loop
+    ends after that cycle."""
+    idle = ControlLoop(0.002, lambda: None)
+    assert idle.stop() is True and not idle.running
+    cycles = []
+    results = []
+
+    def step():
+        cycles.append(1)
+        if len(cycles) == 3:
+            results.append(loop.stop())
+
+    loop = ControlLoop(0.002, step)
+    loop.start()
+    deadline = time.monotonic() + 30.0
+    while loop.running and time.monotonic() < deadline:
+        time.sleep(0.01)                          # poll: the loop ends by itself
+    assert not loop.running
+    assert cycles == [1, 1, 1]
+    # from inside, the thread is still alive when stop() returns
+    assert results == [False]
+
+
+def test_the_loop_thread_does_not_keep_a_process_alive():
+    """The loop runs in a daemon thread: a program that returns without
+    stopping its loop (e.g. after an exception) exits instead of hanging."""
+    loop = ControlLoop(0.01, lambda: None, name="test_loop_daemon")
+    loop.start()
+    try:
+        threads = [t for t in threading.enumerate() if t.name == "test_loop_daemon"]
+        assert len(threads) == 1 and threads[0].daemon
+    finally:
+        loop.stop()
+
+
+class _SimulatedTime:
+    """The loop's clocks and sleep, simulated: ``perf_counter`` [s] moves
+    only when a step computes or the loop sleeps; ``thread_time`` [s] moves
+    by the CPU share of each step. A sleep (``Event.wait``) ends exactly at
+    the deadline (the timeout plus the loop's 0.2 ms busy-wait tail) plus
+    any oversleep scripted for it. A clock read that never moves time on
+    (a busy-wait past the deadline) ends the run with an error instead of
+    spinning forever."""
+
+    def __init__(self, spin, oversleep):
+        self.now = 0.0
+        self.cpu = 0.0
+        self.spin = spin
+        self.oversleep = list(oversleep)
+        self.reads = 0
+        sim = self
+
+        class Event:
+            def __init__(self):
+                self.flag = False
+
+            def set(self):
+                self.flag = True
+
+            def is_set(self):
+                return self.flag
+
+            def wait(self, timeout):
+                sim.now += timeout + sim.spin + (sim.oversleep.pop(0) if sim.oversleep else 0.0)
+                sim.reads = 0
+                return self.flag
+
+        self.Event = Event
+        self.Thread = threading.Thread
+        self.current_thread = threading.current_thread
+
+    def perf_counter(self):
+        self.reads += 1
+        if self.reads > 1000:
+            raise RuntimeError("busy-waiting on a clock that does not move")
+        return self.now
+
+    def thread_time(self):
+        return self.cpu
+
+    def compute(self, wall, cpu):
+        self.now += wall
+        self.cpu += cpu
+        self.reads = 0
+
+
+def test_the_cycle_timing_on_simulated_clocks(monkeypatch):
+    """The pacing by hand, period 10 ms, deadlines t0 + k T from t0 = 0:
+    cycle 1 computes 1 ms and sleeps to 10 ms; cycle 2 computes 25 ms
+    (15 ms past its 20 ms deadline: more than a period, an overrun, the
+    deadlines re-anchor to 35 ms); cycle 3 starts at once (period 25 ms),
+    computes 1 ms (0.5 ms of it on the CPU: preempted 0.5 ms) and sleeps to
+    45 ms but wakes 3 ms late (period 13 ms, late 3 ms); cycle 4 computes
+    21 ms (ends at 69 ms, 14 ms past 55 ms: the second overrun); cycle 5
+    starts at once (period 21 ms) and stops the loop."""
+    import holonomic_core.loop as loop_module
+
+    sim = _SimulatedTime(spin=2e-4, oversleep=[0.0, 0.003])
+    monkeypatch.setattr(loop_module, "time", sim)
+    monkeypatch.setattr(loop_module, "threading", sim)
+    script = [(0.001, 0.001), (0.025, 0.025), (0.001, 0.0005), (0.021, 0.021), (0.001, 0.001)]
+    starts = []
+
+    def step():
+        starts.append(sim.now)
+        wall, cpu = script[len(starts) - 1]
+        sim.compute(wall, cpu)
+        if len(starts) == len(script):
+            loop.stop()
+
+    loop = ControlLoop(0.01, step)
+    loop.run()
+    np.testing.assert_allclose(starts, [0.0, 0.01, 0.035, 0.048, 0.069], atol=1e-12)
+    stats = loop.stats
+    assert stats.count == 4 and stats.overruns == 2
+    np.testing.assert_allclose(stats.periods[:4], [0.01, 0.025, 0.013, 0.021], atol=1e-12)
+    np.testing.assert_allclose(stats.compute[:4], [0.025, 0.001, 0.021, 0.001], atol=1e-12)
+    np.testing.assert_allclose(stats.late[:4], [0.0, 0.0, 0.003, 0.0], atol=1e-12)
+    assert stats.max_preempted == pytest.approx(0.0005, abs=1e-12)

@@ -226,8 +226,23 @@ def test_non_zero_commands_while_disarmed_are_counted_and_reported_for_a_while()
     assert ctrl.counters["commands_while_disarmed"] == 1
     clock.t += 1.9
     assert ctrl.commanded_while_disarmed(2.0)   # the diagnostics' 2 s window
+    assert ctrl.status().commanded_while_disarmed
     clock.t += 0.2
     assert not ctrl.commanded_while_disarmed(2.0)
+    assert not ctrl.status().commanded_while_disarmed
     arm(ctrl, clock)
     ctrl.set_command((0.3, 0.0, 0.0))           # armed: the base follows, nothing to report
     assert ctrl.counters["commands_while_disarmed"] == 1
+
+
+def test_status_before_the_first_cycle():
+    """What diagnostics show of a controller built but not yet stepped: no
+    command ever (age inf, stale), no reading (no slipping casters), a zero
+    twist command, nothing scaled (saturation 1), disarmed, no fault."""
+    ctrl, driver, clock = make()
+    s = ctrl.status()
+    assert s.state is ControllerState.DISARMED and s.fault is None
+    assert s.command_age == math.inf and s.stale is True
+    assert s.twist_command == (0.0, 0.0, 0.0) and s.saturation == 1.0
+    assert s.slipping == () and s.cycles == 0
+    assert not s.commanded_while_disarmed

@@ -222,3 +222,70 @@ def test_a_zero_reading_timeout_disables_the_frozen_check():
     monitor = ReadingMonitor(["a"], [1.0], 0.005, MonitorLimits(3.0, 0.0, 0.3, 0.5))
     for k in range(100):                    # the same stamp for 0.5 s
         assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.0 + k * 0.005) is None
+
+
+def test_readings_frozen_for_exactly_the_timeout_are_not_yet_stale():
+    """Stale means frozen for longer than reading_timeout (0.5 s here): the
+    same stamp checked 0.5 s after it last changed is still accepted, 0.5 s
+    + one period later it is named (times chosen exact in binary)."""
+    monitor = ReadingMonitor(["a"], [1.0], 0.25, MonitorLimits(3.0, 0.5, 0.3, 0.5))
+    assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.0) is None
+    assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.5) is None
+    assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.75) == (
+        "joint readings stopped updating 0.750 s ago")
+
+
+def test_glitch_bounds_are_inclusive_with_a_micro_radian_allowance():
+    """By hand, velocity factor 3 on a 1 rad/s joint: a speed reading of
+    exactly 3 rad/s is accepted, more is a glitch. Over dt = 0.25 s (the
+    period; exact in binary) a position may move 3 x 0.25 = 0.75 rad plus
+    1e-6 rad of rounding allowance: 0.75 rad is accepted, 0.7500015 rad is
+    a jump. A repeated stamp (dt = 0) still bounds the jump by a period."""
+    limits = MonitorLimits(3.0, 0.5, 0.3, 0.5)
+
+    def monitor():
+        m = ReadingMonitor(["a"], [1.0], 0.25, limits)
+        assert m.check(JointReading(1.0, [0.0], [0.0], []), 1.0) is None
+        return m
+
+    assert monitor().check(JointReading(1.25, [0.0], [3.0], []), 1.25) is None
+    # (the message rounds 3.0001 to 4 significant digits)
+    assert monitor().check(JointReading(1.25, [0.0], [3.0001], []), 1.25) == (
+        "a: velocity reading 3 rad/s is over 3x its limit (1 rad/s): encoder glitch")
+    assert monitor().check(JointReading(1.25, [0.75], [0.0], []), 1.25) is None
+    assert monitor().check(JointReading(1.25, [0.7500015], [0.0], []), 1.25) == (
+        "a: position jumped by 0.75 rad in 0.25 s: encoder glitch")
+    assert monitor().check(JointReading(1.0, [1.0], [0.0], []), 1.25) == (
+        "a: position jumped by 1 rad in 0 s: encoder glitch")
+
+
+def test_a_zero_tracking_timeout_disables_the_tracking_check():
+    """tracking_timeout 0 disables the check: a joint that never follows its
+    command (2 rad/s commanded, 0 measured, far over 0.3 x 1 rad/s) is not
+    named, however long it lasts."""
+    monitor = ReadingMonitor(["a"], [1.0], 0.25, MonitorLimits(3.0, 0.5, 0.3, 0.0))
+    for k in range(10):
+        assert monitor.check(JointReading(1.0 + 0.25 * k, [0.0], [0.0], []), 1.0 + 0.25 * k,
+                             np.array([2.0])) is None
+
+
+def test_tracking_timer_starts_when_armed_and_names_the_time():
+    """By hand, tracking error 0.25 of a 1 rad/s limit and a 0.5 s timeout,
+    checks every 0.25 s: while disarmed (no command) nothing is timed; armed
+    with 2 rad/s commanded and 0 measured the timer starts at the first
+    armed check (1.25 s) and the joint is named once it has not followed for
+    the whole timeout (at 1.75 s: 0.50 s). A joint exactly at the tracking
+    bound (1.75 of 2 rad/s: 0.25 off) follows, however long."""
+    limits = MonitorLimits(3.0, 0.5, 0.25, 0.5)
+    monitor = ReadingMonitor(["a"], [1.0], 0.25, limits)
+    assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.0, None) is None
+    for t in (1.25, 1.5):
+        assert monitor.check(JointReading(t, [0.0], [0.0], []), t, np.array([2.0])) is None
+    assert monitor.check(JointReading(1.75, [0.0], [0.0], []), 1.75, np.array([2.0])) == (
+        "a: cannot follow its command (2 rad/s commanded, 0 rad/s measured for 0.50 s): "
+        "motor saturated or blocked")
+    at_bound = ReadingMonitor(["a"], [1.0], 0.25, limits)
+    for k in range(8):
+        t = 1.0 + 0.25 * k
+        assert at_bound.check(JointReading(t, [0.4375 * k], [1.75], []), t,
+                              np.array([2.0])) is None

@@ -114,3 +114,30 @@ def test_arc_between_inverts_the_constant_twist_arc():
     start, arc = (0.3, -1.2, 2.5), (0.4, -0.7, -1.1)
     end = se2.integrate_arc(start, *arc)
     assert se2.arc_between(start, end) == pytest.approx(arc)
+
+
+def test_the_small_angle_arc_keeps_the_chord_to_the_last_digit():
+    """Below 1e-6 rad the arc uses the series of sin(t)/t and (1 - cos t)/t.
+    For t = 9e-7 rad and 1 m forward, the chord is (sin t / t, 2 sin^2(t/2)
+    / t) -- written without the cancellation of 1 - cos t -- i.e. x = 1 -
+    1.35e-13 m: the series must give it to a few 1e-16 m (a wrong t^2
+    coefficient is off by 2e-14 m or more)."""
+    t = 9e-7
+    x, y = se2.compose_arc((0.0, 0.0, 0.0), 1.0, 0.0, t)
+    assert abs(x - math.sin(t) / t) < 1e-15
+    # (b = t/2: the series drops t^3 / 24 = 3e-20 m)
+    assert abs(y - 2.0 * math.sin(0.5 * t) ** 2 / t) < 1e-19
+
+
+def test_a_sideways_arc_a_start_off_the_diagonal_and_a_rolled_yaw():
+    """By hand: 1 m to the left while turning a quarter turn (constant
+    twist) is an arc of radius 2/pi about (-2/pi, 0): it ends at (-2/pi,
+    2/pi). From (1, 2) heading 0, 1 m forward ends at (2, 2). A rotation of
+    roll 0.4 rad then yaw 0.7 rad (q = q_z(0.7) q_x(0.4)) has yaw 0.7 rad."""
+    x, y = se2.compose_arc((0.0, 0.0, 0.0), 0.0, 1.0, math.pi / 2)
+    assert x == pytest.approx(-2 / math.pi, abs=1e-15) and y == pytest.approx(2 / math.pi)
+    assert se2.integrate_arc((1.0, 2.0, 0.0), 1.0, 0.0, 0.0) == pytest.approx((2.0, 2.0, 0.0))
+    c, s = math.cos(0.35), math.sin(0.35)           # half of the yaw
+    cr, sr = math.cos(0.2), math.sin(0.2)           # half of the roll
+    q = (c * sr, s * sr, s * cr, c * cr)            # (x, y, z, w) of q_z q_x
+    assert se2.yaw_of_quaternion(q) == pytest.approx(0.7, abs=1e-12)

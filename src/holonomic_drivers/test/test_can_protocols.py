@@ -47,10 +47,28 @@ def test_odrive_ids_and_enumerations_are_the_firmwares():
     assert {m.name: m.value for m in proto.InputMode} == {
         "INACTIVE": 0, "PASSTHROUGH": 1, "VEL_RAMP": 2}
     assert proto.MAX_NODE_ID == 63                      # 6 bits above the 5-bit command
+    # firmware 0.6 reserves node id 0x3F for broadcast and discovery (ODrive's
+    # CAN protocol docs), so an axis there gets at most 62; 0.5 allows all 6 bits
+    assert proto.BROADCAST_NODE_ID == 0x3F
+    assert proto.max_node_id("0.5") == 63 and proto.max_node_id("0.6") == 62
     assert proto.error_names(0x1000000 | 0x2000000) == "WATCHDOG_TIMER_EXPIRED|ESTOP_REQUESTED"
     assert proto.error_names(0x4 | 0x8) == "TIMING_ERROR|MISSING_ESTIMATE"
     assert proto.error_names(0x1 | 0x2) == "INITIALIZING|SYSTEM_LEVEL"
     assert proto.error_names(0) == "none"
+    # firmware 0.5's Axis.Error bits (its axis.hpp): the same bits name
+    # other errors on 0.6
+    for bit, name in ((0x1, "INVALID_STATE"), (0x40, "MOTOR_FAILED"),
+                      (0x80, "SENSORLESS_ESTIMATOR_FAILED"), (0x100, "ENCODER_FAILED"),
+                      (0x200, "CONTROLLER_FAILED"), (0x800, "WATCHDOG_TIMER_EXPIRED"),
+                      (0x1000, "MIN_ENDSTOP_PRESSED"), (0x2000, "MAX_ENDSTOP_PRESSED"),
+                      (0x4000, "ESTOP_REQUESTED"), (0x20000, "HOMING_WITHOUT_ENDSTOP"),
+                      (0x40000, "OVER_TEMP"), (0x80000, "UNKNOWN_POSITION")):
+        assert proto.error_names(bit, "0.5") == name
+    # the bits the emulated axis raises are these names on each firmware
+    for firmware in proto.FIRMWARES:
+        assert proto.error_names(proto.WATCHDOG_TIMER_EXPIRED[firmware], firmware) == \
+            "WATCHDOG_TIMER_EXPIRED"
+        assert proto.error_names(proto.ESTOP_REQUESTED[firmware], firmware) == "ESTOP_REQUESTED"
 
 
 def test_odrive_host_commands_are_encoded_byte_for_byte():
@@ -186,6 +204,16 @@ def test_canopen_identifiers_and_indices_are_the_standards():
         "BOOT_UP": 0x00, "STOPPED": 0x04, "OPERATIONAL": 0x05, "PRE_OPERATIONAL": 0x7F}
     assert (co.DEVICE_TYPE, co.ERROR_REGISTER, co.CONSUMER_HEARTBEAT_TIME,
             co.PRODUCER_HEARTBEAT_TIME) == (0x1000, 0x1001, 0x1016, 0x1017)
+    # SDO abort codes (CiA 301): object / sub-index does not exist, write to a
+    # read-only object, value range exceeded, not in the present device
+    # state, command specifier not valid
+    assert (co.ABORT_NO_OBJECT, co.ABORT_NO_SUBINDEX, co.ABORT_READ_ONLY, co.ABORT_RANGE,
+            co.ABORT_STATE, co.ABORT_UNSUPPORTED) == (
+        0x06020000, 0x06090011, 0x06010002, 0x06090030, 0x08000022, 0x05040001)
+    # node guarding (CiA 301): guard time and life time factor
+    assert (co.GUARD_TIME, co.LIFE_TIME_FACTOR) == (0x100C, 0x100D)
+    # CiA 402 factor group: SI unit of velocity, gear ratio, feed constant
+    assert (co.SI_UNIT_VELOCITY, co.GEAR_RATIO, co.FEED_CONSTANT) == (0x60A9, 0x6091, 0x6092)
     assert (co.RPDO_COMM, co.RPDO_MAP, co.TPDO_COMM, co.TPDO_MAP) == (0x1400, 0x1600, 0x1800,
                                                                       0x1A00)
     assert (co.ERROR_CODE, co.CONTROLWORD, co.STATUSWORD, co.QUICK_STOP_OPTION,
@@ -216,7 +244,14 @@ def test_sdo_expedited_frames_byte_for_byte():
     assert co.sdo_download_response(0x6040, 0) == H("60 40 60 00 00 00 00 00")
     assert co.sdo_abort(0x6060, 0, co.ABORT_RANGE) == H("80 60 60 00 30 00 09 06")
     assert co.emcy(0x2310) == H("10 23 01 00 00 00 00 00")
+    # an EMCY frame is 8 bytes: the vendor field is cut to its 5
+    assert co.emcy(0x2310, 0x01, bytes(range(1, 7))) == H("10 23 01 01 02 03 04 05")
     assert co.pdo_map_entry(0x60FF, 0, 32) == 0x60FF0020
+    # index (16 bits), sub-index (8 bits), length in bits (8 bits), CiA 301
+    assert co.pdo_map_entry(0x2000, 3, 8) == 0x20000308
+    # an expedited transfer carries 1 to 4 bytes: more needs a segmented one
+    with pytest.raises(ValueError, match="1..4 bytes"):
+        co.sdo_download_request(0x2000, 0, bytes(5))
 
 
 def test_statusword_decoding_and_power_state_machine():
@@ -228,6 +263,17 @@ def test_statusword_decoding_and_power_state_machine():
     assert co.state_of(0x0233) is State.SWITCHED_ON
     assert co.state_of(0x0217) is State.QUICK_STOP_ACTIVE
     assert co.state_of(0x021F) is State.FAULT_REACTION_ACTIVE
+    assert co.state_of(0x0218) is State.FAULT
+    # statusword bits (CiA 402): 3 fault, 4 voltage enabled, 9 remote
+    assert (co.STATUS_FAULT_BIT, co.STATUS_VOLTAGE_ENABLED, co.STATUS_REMOTE) == (
+        0x0008, 0x0010, 0x0200)
+    # bit 4 (voltage enabled) is not part of any state's pattern: each state
+    # reads back from the word a drive reports in it, with or without voltage
+    # (READY TO SWITCH ON without voltage: 0x21 with the remote bit 9)
+    assert co.statusword_of(State.READY_TO_SWITCH_ON, voltage=False) == 0x0221
+    for state in State:
+        for voltage in (True, False):
+            assert co.state_of(co.statusword_of(state, voltage)) is state, (state, voltage)
     state = State.SWITCH_ON_DISABLED
     for word, expected in ((Control.SHUTDOWN, State.READY_TO_SWITCH_ON),
                            (Control.SWITCH_ON, State.SWITCHED_ON),
@@ -238,6 +284,21 @@ def test_statusword_decoding_and_power_state_machine():
                            (Control.DISABLE_VOLTAGE, State.SWITCH_ON_DISABLED)):
         state = co.next_state(state, word, 0)
         assert state is expected
+    # the commands are bit patterns with don't-care bits (CiA 402 device control
+    # commands): quick stop is bit 2 = 0, bit 1 = 1, bit 7 = 0, whatever bit 0
+    # says (0x0003); disable voltage is bit 1 = 0, bit 7 = 0, whatever bits 0
+    # and 2 say (0x0001, 0x0005)
+    assert co.next_state(State.OPERATION_ENABLED, 0x0003, 0) is State.QUICK_STOP_ACTIVE
+    assert co.next_state(State.QUICK_STOP_ACTIVE, 0x0001, 0) is State.SWITCH_ON_DISABLED
+    assert co.next_state(State.OPERATION_ENABLED, 0x0005, 0) is State.SWITCH_ON_DISABLED
+    # disable voltage or quick stop from the two "voltage enabled, not
+    # operating" states ends in SWITCH ON DISABLED
+    assert co.next_state(State.READY_TO_SWITCH_ON, Control.DISABLE_VOLTAGE, 0) \
+        is State.SWITCH_ON_DISABLED
+    assert co.next_state(State.SWITCHED_ON, Control.QUICK_STOP, 0) is State.SWITCH_ON_DISABLED
+    # a drive in FAULT leaves it only by a fault reset, which the caller
+    # handles: a disable-voltage word (0x0000) keeps it in FAULT
+    assert co.next_state(State.FAULT, 0x0000, 0) is State.FAULT
     # enable operation is not a legal jump out of SWITCH ON DISABLED
     assert co.next_state(State.SWITCH_ON_DISABLED, Control.ENABLE_OPERATION, 0) \
         is State.SWITCH_ON_DISABLED
@@ -393,3 +454,48 @@ def test_the_rigs_bus_delivers_the_last_frames_of_a_node_that_closes(tmp_path):
         closing.shutdown()
         listener.shutdown()
         hub.stop()
+
+
+def test_odrive_0_5_heartbeat_carries_the_sub_object_error_flags():
+    """Firmware 0.5.x's heartbeat (ODrive CAN protocol docs of 0.5): bytes
+    0-3 axis error, byte 4 axis state, then one byte each with the motor
+    (bit 40 of the payload), encoder (bit 48) and controller (bit 56) error
+    flags, and trajectory done in the last bit (63). So motor + encoder +
+    controller flags and trajectory done give the bytes 01 01 81."""
+    hb = proto.Heartbeat.decode(H("40 00 00 00 08 01 01 81"), "0.5")
+    assert (hb.axis_error, hb.axis_state, hb.trajectory_done) == (0x40, 8, True)
+    assert hb.error_flags == ("motor", "encoder", "controller")
+    assert hb.faulted
+    assert hb.describe("0.5") == "0x40 (MOTOR_FAILED), motor encoder controller error flag"
+    only_encoder = proto.Heartbeat(0, 8, 0, False, ("encoder",))
+    assert only_encoder.encode("0.5") == H("00 00 00 00 08 00 01 00")
+    # an error flag alone (axis error 0) is a fault; no flag and no error is not
+    assert only_encoder.faulted
+    healthy = proto.Heartbeat(0, 8, 0, True)
+    assert not healthy.faulted
+    assert healthy.encode("0.5") == H("00 00 00 00 08 00 00 80")
+    assert proto.Heartbeat.decode(healthy.encode("0.5"), "0.5") == healthy
+
+
+def test_odrive_0_6_heartbeat_of_seven_bytes_with_a_procedure_result():
+    """Firmware 0.6.x's heartbeat: bytes 0-3 axis error, byte 4 axis state,
+    byte 5 procedure result, byte 6 bit 0 trajectory done; the 8th byte is
+    reserved and may be left out. Here: procedure result 2, trajectory not
+    done."""
+    hb = proto.Heartbeat.decode(H("00 00 00 00 01 02 00"))
+    assert (hb.axis_error, hb.axis_state, hb.procedure_result, hb.trajectory_done) == (
+        0, 1, 2, False)
+    assert not hb.faulted
+
+
+def test_odrive_error_status_and_an_unfinished_0_5_trajectory():
+    """Get_Error (0x03) on 0.6: active_errors and disarm_reason, two
+    little-endian u32; anything but 8 bytes is refused. A 0.5 heartbeat with
+    the top bit (63) clear: trajectory not done."""
+    status = proto.ErrorStatus.decode(H("00 00 00 01 20 00 00 00"))
+    assert (status.active_errors, status.disarm_reason) == (0x1000000, 0x20)
+    assert status.encode() == H("00 00 00 01 20 00 00 00")
+    with pytest.raises(ValueError, match="8 expected"):
+        proto.ErrorStatus.decode(H("00 00 00 01 20 00 00"))
+    moving = proto.Heartbeat.decode(H("00 00 00 00 08 00 01 00"), "0.5")
+    assert moving.trajectory_done is False and moving.error_flags == ("encoder",)

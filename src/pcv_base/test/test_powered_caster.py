@@ -281,6 +281,7 @@ def test_per_caster_values_override_the_shared_ones():
     ({"pcv.casters": ["front_left"]}, "pcv.casters"),
     ({"pcv.casters": ["front_left", "front_left"]}, "pcv.casters"),
     ({"pcv.casters": ["front left", "rear_left"]}, "pcv.casters"),
+    ({"pcv.casters": [1, 2]}, "pcv.casters"),          # not names: refused, no TypeError
     ({"pcv.front_left.h": 0.05, "pcv.front_left.beta": 0.0,
       "pcv.rear_left.h": 0.05, "pcv.rear_left.beta": 3.14159}, "pcv.rear_left.h"),
 ])
@@ -296,3 +297,148 @@ def test_constructor_rejects_fewer_than_two_casters_and_zero_offset():
     with pytest.raises(ConfigError, match="not be holonomic|not\\s+be holonomic"):
         PoweredCasterKinematics([Caster("a", 0.2, 0.0, 0.05, 0.0),
                                  Caster("b", 0.2, math.pi, 0.05, 0.02)])
+
+
+def test_steering_axes_no_further_apart_than_the_two_offsets_are_refused():
+    """By hand: casters b and c have their steering axes at (0, 0.1) and
+    (0, -0.1), 0.2 m apart; with offsets b = 0.1 m each the circles their
+    contact points move on touch (0.2 <= 0.1 + 0.1), so the wheels can meet:
+    refused, naming the later caster's h, the bound and the distance. They
+    are the 2nd and 3rd of three casters: every pair is checked. Offsets of
+    0.099 m leave 2 mm between the circles: accepted."""
+    def three(b):
+        return [Caster("a", 0.3, 0.0, 0.05, b), Caster("b", 0.1, math.pi / 2, 0.05, b),
+                Caster("c", 0.1, -math.pi / 2, 0.05, b)]
+
+    with pytest.raises(ConfigError) as info:
+        PoweredCasterKinematics(three(0.1))
+    assert info.value.key == "pcv.c.h"
+    assert "more than b_b + b_c = 0.2 m from caster b's (it is 0.2 m" in str(info.value)
+    assert len(PoweredCasterKinematics(three(0.099)).casters) == 3
+
+
+def test_steering_axis_at_the_origin_is_valid_and_an_infinite_one_is_not():
+    """h = 0 (a caster under the base_link origin) is a valid geometry (the
+    check is h >= 0); h = inf or beta = nan is refused, naming the key."""
+    kin = PoweredCasterKinematics([Caster("a", 0.0, 0.0, 0.05, 0.02),
+                                   Caster("b", 0.3, math.pi, 0.05, 0.02)])
+    assert kin.caster_names == ("a", "b")
+    for h, beta in ((math.inf, 0.0), (0.3, math.nan)):
+        with pytest.raises(ConfigError) as info:
+            PoweredCasterKinematics([Caster("a", 0.0, 0.0, 0.05, 0.02),
+                                     Caster("b", h, beta, 0.05, 0.02)])
+        assert info.value.key == "pcv.b.h"
+
+
+def test_joint_slices_and_frozen_caster_geometry():
+    """Joint order (steer, wheel) per caster: the steering joints are the even
+    entries, the wheels the odd ones. A Caster cannot be changed after the
+    kinematics copied its numbers (it is frozen)."""
+    import dataclasses
+
+    kin = PoweredCasterKinematics([Caster("a", 0.3, 0.0, 0.05, 0.02),
+                                   Caster("b", 0.3, math.pi, 0.05, 0.02)])
+    q = np.array([0.1, 5.0, 0.2, 6.0])
+    np.testing.assert_array_equal(q[kin.steer_indices], [0.1, 0.2])
+    np.testing.assert_array_equal(q[kin.wheel_indices], [5.0, 6.0])
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        kin.casters[0].h = 0.5
+
+
+@pytest.mark.parametrize("key, value, allowed", [
+    ("pcv.wheel_radius", 10.5, "(0, 10]"),
+    ("pcv.caster_offset", 10.5, "[0, 10]"),
+    ("pcv.front_left.h", 100.5, "[0, 100]"),
+    ("pcv.front_left.h", -0.1, "[0, 100]"),
+    ("pcv.front_left.beta", 10.5, "[-10, 10]"),
+    ("pcv.front_left.beta", -10.5, "[-10, 10]"),
+    ("pcv.front_left.wheel_radius", 0.0, "(0, 10]"),
+    ("pcv.front_left.wheel_radius", 10.5, "(0, 10]"),
+    ("pcv.front_left.caster_offset", 10.5, "[0, 10]"),
+])
+def test_geometry_out_of_range_is_refused_by_the_schema_with_its_range(key, value, allowed):
+    """The README's parameter ranges: lengths up to 10 m (h: 100 m), angles
+    within +-10 rad, radii open at 0; offsets closed at 0 so that b = 0
+    reaches the constructor's explanation."""
+    with pytest.raises(ConfigError) as info:
+        load_config("xr4000", {key: value})
+    assert info.value.key == key
+    assert f"expected a number in {allowed}" in str(info.value)
+
+
+def test_two_casters_are_enough():
+    """Two casters (4 constraints on 3 DOF) make a holonomic base: the
+    schema's minimum list length is 2."""
+    model = load_model("xr4000", {"pcv.casters": ["front_left", "rear_right"]})
+    assert model.joint_names == ("front_left_steer_joint", "front_left_wheel_joint",
+                                 "rear_right_steer_joint", "rear_right_wheel_joint")
+
+
+def test_two_wheels_skidding_at_once_are_not_blamed_on_one():
+    """Two casters' wheels spin at once (0.5 and 0.3 m/s of rolling slip):
+    leaving either out leaves the other's burst, far more than
+    ROBUST_CONCENTRATION (5 %) of the residual energy, so no single caster
+    explains the disagreement and robust keeps the slip_min twist exactly
+    (rejecting the larger one would move the twist by tenths of m/s)."""
+    kin = load_model("xr4000").kinematics
+    q = np.array([0.3, 0.0, -0.4, 0.0, 1.0, 0.0, 2.0, 0.0])
+    rates = kin.inverse(q, np.array([0.4, -0.2, 0.3]))
+    rates[1] += 0.5 / kin.r[0]
+    rates[5] += 0.3 / kin.r[2]
+    np.testing.assert_array_equal(kin.forward(q, rates, "robust"),
+                                  kin.forward(q, rates, "slip_min"))
+
+
+def test_each_estimators_residual_is_the_contact_slip_its_twist_leaves():
+    """By definition (eq. 10 inverted, eq. 11): the sensed contact velocities
+    u = C_q^-1 q_dot minus the rigid field C_p x of the estimator's twist x,
+    per caster the norm of its 2 rows [m/s]. Computed here with the
+    matrices, for joint rates with slip on every caster (so pinv's twist,
+    which weighs the rows differently, leaves a different residual)."""
+    rng = np.random.default_rng(7)
+    kin = load_model("xr4000").kinematics
+    q = rng.uniform(-math.pi, math.pi, 8)
+    rates = kin.inverse(q, np.array([0.3, 0.1, -0.4])) + rng.normal(0.0, 0.5, 8)
+    u = kin.joint_to_contact(q) @ rates
+    for estimator in ESTIMATORS:
+        twist, residual = kin.estimate(q, rates, estimator)
+        rows = u - kin.contact_jacobian(q) @ twist
+        expected = np.hypot(rows[0::2], rows[1::2])
+        np.testing.assert_allclose(residual, expected, rtol=1e-9, atol=1e-12)
+        assert np.all(residual > 1e-3)
+
+
+def test_a_burst_two_casters_explain_equally_is_not_blamed_on_either():
+    """3 casters: the fit's residual space is 3-dimensional and a burst on
+    caster i leaves a residual in its plane (I - H) E_i (H = C_p C_p^+,
+    E_i: caster i's two rows). Two planes meet along a line; a burst of
+    0.5 m/s on caster 0 whose residual lies on the line it shares with
+    caster 1 is explained as well by caster 1's burst. Robust cannot tell
+    which caster slipped and keeps the slip_min twist exactly."""
+    kin = load_model("comr3").kinematics
+    q = np.array([0.4, 0.0, -1.1, 0.0, 2.2, 0.0])
+    cp = kin.contact_jacobian(q)
+    residual_space = np.eye(6) - cp @ np.linalg.pinv(cp)
+    planes = [residual_space[:, 2 * i:2 * i + 2] for i in range(3)]
+    # a0, b1 with planes[0] a0 = planes[1] b1: the null space of [P0, -P1]
+    null = np.linalg.svd(np.hstack((planes[0], -planes[1])))[2][-1]
+    burst = np.zeros(6)
+    burst[0:2] = null[:2] / np.linalg.norm(null[:2]) * 0.5
+    np.testing.assert_allclose(planes[0] @ null[:2], planes[1] @ null[2:], atol=1e-12)
+    twist = np.array([0.3, -0.1, 0.2])
+    rates = kin.contact_to_joint(q) @ (cp @ twist + burst)
+    slip_min = kin.forward(q, rates, "slip_min")
+    assert np.linalg.norm(slip_min - twist) > 0.05            # the burst moves slip_min
+    np.testing.assert_array_equal(kin.forward(q, rates, "robust"), slip_min)
+
+
+def test_only_the_slip_min_fit_has_a_compiled_form():
+    """The compiled hot path covers the slip_min fit (per caster sx, sy, b,
+    r); robust and pinv stay in Python, so they get no compiled geometry."""
+    from holonomic_core import hot_path
+
+    kin = load_model("xr4000").kinematics
+    kind, geometry = kin.hot_path_geometry("slip_min")
+    assert kind == hot_path.KIND_PCV
+    np.testing.assert_array_equal(geometry, np.ravel(kin.contact_geometry))
+    assert kin.hot_path_geometry("robust") is None and kin.hot_path_geometry("pinv") is None
