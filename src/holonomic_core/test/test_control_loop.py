@@ -209,16 +209,19 @@ def test_boundaries_and_counts_of_the_long_period_causes():
 def test_loop_parameters_defaults_and_ranges():
     """The loop's parameters as the README tables give them: a loop process
     of its own with real-time priority by default, SCHED_FIFO priorities
-    1-98, and a 2 s watchdog within 0.01-60 s."""
+    1-98, a 2 s watchdog within 0.01-60 s, and a 0.1 ms slice on the normal
+    scheduler within 0-0.1 s (0: the kernel's own; the kernel takes 0.1-100 ms)."""
     from holonomic_core.loop import LOOP_SPECS
     from holonomic_core.realtime import DEFAULT_PRIORITY
     from holonomic_core.schema import ConfigError, validate
 
     defaults = validate(LOOP_SPECS, {})
     assert defaults == {"loop.process": True, "loop.realtime": True,
-                        "loop.priority": DEFAULT_PRIORITY, "loop.watchdog_timeout": 2.0}
+                        "loop.priority": DEFAULT_PRIORITY, "loop.watchdog_timeout": 2.0,
+                        "loop.slice": 1e-4}
     for key, good, bad in (("loop.priority", (1, 98), (0, 99)),
-                           ("loop.watchdog_timeout", (0.01, 60.0), (0.005, 60.5))):
+                           ("loop.watchdog_timeout", (0.01, 60.0), (0.005, 60.5)),
+                           ("loop.slice", (0.0, 0.1), (-1e-6, 0.11))):
         for value in good:
             assert validate(LOOP_SPECS, {key: value})[key] == value
         for value in bad:
