@@ -322,6 +322,9 @@ def test_implausible_reading_faults_a_disarmed_base_once_and_blocks_arming():
     driver.glitch = False
     arm(ctrl, clock)
     assert ctrl.state is ControllerState.ARMED
+    driver.glitch = True                    # armed again: a new fault, counted
+    run(ctrl, clock, 1)
+    assert ctrl.status().implausible_readings == 2
 
 
 def test_arm_twice_and_disarm_answer_the_request():
@@ -471,3 +474,9 @@ def test_velocity_mode_follows_a_trajectory_then_rests():
     run(ctrl, clock, 100)                        # at rest, the trajectory not called again
     assert len(times) == 3
     np.testing.assert_allclose(ctrl.twist_command, 0.0, atol=1e-12)
+
+
+def test_state_names_seen_by_diagnostics():
+    """The diagnostics' controller_state value is the state's value (the node
+    publishes status.state.value): the names operators and their tools read."""
+    assert [s.value for s in ControllerState] == ["disarmed", "armed", "fault"]
