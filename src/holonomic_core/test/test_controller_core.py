@@ -480,3 +480,19 @@ def test_state_names_seen_by_diagnostics():
     """The diagnostics' controller_state value is the state's value (the node
     publishes status.state.value): the names operators and their tools read."""
     assert [s.value for s in ControllerState] == ["disarmed", "armed", "fault"]
+
+
+def test_status_reports_the_drift_watch_only_where_it_applies():
+    """The powered-caster bases run the calibration drift watch (on by default,
+    drift_watch.enabled): before any motion it has no findings and has judged
+    nothing. The HAMR has none: its findings are None, not an empty list."""
+    cfg = load_config("comr3", {"driver": "mock"})
+    clock = FakeClock()
+    driver = MockDriver(cfg.model, cfg.values, cfg.controller.control_rate, clock=clock)
+    driver.configure()
+    ctrl = BaseController(cfg, driver, clock=clock)
+    run(ctrl, clock, 2)
+    s = ctrl.status()
+    assert s.drift_findings == () and s.drift_judged is False
+    hamr, _, _ = make()
+    assert hamr.status().drift_findings is None and hamr.status().drift_judged is False
