@@ -47,6 +47,13 @@ def run(ctrl, clock, cycles):
         ctrl.step()
 
 
+def drive(ctrl, clock, twist, cycles):
+    """``cycles`` cycles with ``twist`` received before each (a live publisher)."""
+    for _ in range(cycles):
+        ctrl.set_command(twist)
+        run(ctrl, clock, 1)
+
+
 def arm(ctrl, clock):
     fut = ctrl.request_enable(True)
     run(ctrl, clock, 1)
@@ -88,9 +95,7 @@ def test_armed_base_follows_the_command_after_the_ramp():
 def test_stale_command_stops_the_base_within_the_deceleration_limit():
     ctrl, driver, clock = make()
     arm(ctrl, clock)
-    for _ in range(400):
-        ctrl.set_command((1.0, 0.0, 0.0))
-        run(ctrl, clock, 1)
+    drive(ctrl, clock, (1.0, 0.0, 0.0), 400)
     assert ctrl.twist_command[0] == pytest.approx(1.0)
     # publisher dies: for cmd_timeout (0.5 s) the command holds ...
     run(ctrl, clock, int(0.5 / ctrl.dt) - 1)
@@ -124,9 +129,7 @@ def test_zero_timeout_disables_the_timeout():
 def test_non_finite_or_malformed_command_is_rejected_and_stops_the_base(bad):
     ctrl, driver, clock = make()
     arm(ctrl, clock)
-    for _ in range(200):
-        ctrl.set_command((0.5, 0.0, 0.0))
-        run(ctrl, clock, 1)
+    drive(ctrl, clock, (0.5, 0.0, 0.0), 200)
     reason = ctrl.set_command(bad)
     assert reason and "rejected" in reason
     assert ctrl.counters["rejected_commands"] == 1
@@ -161,9 +164,7 @@ def test_oversized_command_is_scaled_within_limits_keeping_direction():
 def test_driver_that_stops_answering_faults_disarms_and_recovers_after_enable():
     ctrl, driver, clock = make(FlakyMock)
     arm(ctrl, clock)
-    for _ in range(100):
-        ctrl.set_command((0.5, 0.0, 0.0))
-        run(ctrl, clock, 1)
+    drive(ctrl, clock, (0.5, 0.0, 0.0), 100)
     driver.fail = True
     run(ctrl, clock, 1)
     assert ctrl.state is ControllerState.FAULT
@@ -184,9 +185,7 @@ def test_driver_that_stops_answering_faults_disarms_and_recovers_after_enable():
 def test_reset_odometry_request_zeroes_the_pose():
     ctrl, driver, clock = make()
     arm(ctrl, clock)
-    for _ in range(200):
-        ctrl.set_command((0.5, 0.0, 0.0))
-        run(ctrl, clock, 1)
+    drive(ctrl, clock, (0.5, 0.0, 0.0), 200)
     assert ctrl.odometry.pose[0] > 0.1
     fut = ctrl.request_reset_odometry()
     run(ctrl, clock, 1)
@@ -344,9 +343,7 @@ def test_arm_twice_and_disarm_answer_the_request():
 def test_disarming_a_saturated_base_reports_rest_and_no_scaling():
     ctrl, driver, clock = make()
     arm(ctrl, clock)
-    for _ in range(600):
-        ctrl.set_command((1e308, 1e308, 0.0))
-        run(ctrl, clock, 1)
+    drive(ctrl, clock, (1e308, 1e308, 0.0), 600)
     assert ctrl.status().saturation < 1.0
     fut = ctrl.request_enable(False)
     run(ctrl, clock, 2)
@@ -362,9 +359,7 @@ def test_saturated_twist_command_is_what_the_joints_do():
     joint command, and the fastest joint is at its limit."""
     ctrl, driver, clock = make()
     arm(ctrl, clock)
-    for _ in range(600):
-        ctrl.set_command((1e308, 1e308, 0.0))
-        run(ctrl, clock, 1)
+    drive(ctrl, clock, (1e308, 1e308, 0.0), 600)
     assert ctrl.saturation < 1.0
     rates = ctrl.model.kinematics.inverse(ctrl.reading.positions, ctrl.twist_command)
     np.testing.assert_allclose(rates, ctrl.joint_command, rtol=1e-9, atol=1e-12)
