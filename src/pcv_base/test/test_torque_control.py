@@ -265,6 +265,22 @@ def _osc(kp=4.0, kv=2.0, max_efforts=(100.0, 100.0, 100.0), **kw):
     return OperationalSpaceController(cfg.model, kp, kv, max_efforts, dynamics=_KnownMass(**kw))
 
 
+def test_a_new_or_reset_controller_holds_a_reference_at_rest():
+    """Before the first cycle: the reference at rest at the origin, no
+    wrench. After reset(pose): at rest at that pose, so a base standing
+    there has no error at all."""
+    osc = _osc()
+    e_pose, e_twist = osc.errors((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    np.testing.assert_array_equal(e_pose, np.zeros(3))
+    np.testing.assert_array_equal(e_twist, np.zeros(3))
+    np.testing.assert_array_equal(osc.wrench, np.zeros(3))
+    osc.step(None, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.5, 0.0, 0.0), 0.1)
+    osc.reset((1.0, 2.0, 0.5))
+    e_pose, e_twist = osc.errors((1.0, 2.0, 0.5), (0.0, 0.0, 0.0))
+    np.testing.assert_allclose(e_pose, np.zeros(3), atol=1e-15)
+    np.testing.assert_array_equal(e_twist, np.zeros(3))
+
+
 def test_the_pd_law_in_base_link_by_hand():
     """Reference at rest at the origin; base at (0.1, -0.05, 0.02) moving at
     vx = 0.2. The error x - x_d in base_link: the world offset (0.1, -0.05)
@@ -345,6 +361,7 @@ def test_a_base_held_far_off_pulls_the_reference_to_max_error():
 
 @pytest.mark.parametrize("wrench,expected", [
     ((4.0, -2.0, 1.0), (1.0, -0.5, 0.25)),          # worst 4x the limit: all / 4
+    ((1.5, -0.75, 0.3), (1.0, -0.5, 0.2)),          # worst 1.5x: all / 1.5
     ((1.0, -0.5, 0.25), (1.0, -0.5, 0.25)),         # exactly at the limit: unchanged
     ((0.5, 0.2, -0.1), (0.5, 0.2, -0.1)),           # within: unchanged
     ((np.nan, 0.0, 0.0), (0.0, 0.0, 0.0)),          # NaN: no torque at all
