@@ -378,3 +378,39 @@ def test_a_ramp_lags_half_the_window_and_shows_in_the_twist_variance():
     var = np.diag(odo.twist_covariance)
     assert var[0] == pytest.approx(1e-6 + 1.5 * (a * w / 2) ** 2, rel=1e-2)
     assert var[1:] == pytest.approx([1e-6, 1e-6], rel=1e-3)
+
+
+def test_a_new_odometry_reports_rest_and_uses_the_last_two_readings():
+    """Before any motion: no slip, no residual, zero rate twist (what the
+    controller's status and the torque controller read on the first cycle);
+    the default twist window is 0 s (the line through the last two readings)."""
+    odo = Odometry(load_model("xr4000"))
+    assert odo.twist_window == 0.0
+    assert odo.slip == 0.0 and odo.residual.size == 0
+    np.testing.assert_array_equal(odo.rate_twist, np.zeros(3))
+    np.testing.assert_array_equal(odo.twist, np.zeros(3))
+
+
+def test_a_repeated_stamp_moves_the_pose_but_not_the_twist_or_its_window():
+    """hamr at 1 m/s along x, 100 Hz, window 0.05 s. A reading with the same
+    stamp as the last but the wheels 0.01 m further: the pose follows the
+    wheels, the twist (no time elapsed: no rate) stays 1 m/s, and the
+    reading does not enter the window. The next reading (0.01 s later, 0.01 m
+    further again) is fitted with the window's earlier readings: the least-
+    squares line through (t, x) = (-0.04..0 step 0.01, same x) and
+    (0.01, 0.02), np.polyfit's slope (not a clean 1 m/s, nor the 1 m/s of the
+    last two readings alone)."""
+    model = load_model("hamr")
+    odo = Odometry(model, noise=OdometryNoise(latency_variance=0.0), twist_window=0.05)
+    per_m = model.inverse([0, 0, 0], [1.0, 0, 0])          # joint [rad] per metre
+    for k in range(11):                                     # t = -0.10 .. 0.00
+        odo.update(per_m * (k - 10) * 0.01, (k - 10) * 0.01)
+    assert odo.twist[0] == pytest.approx(1.0, rel=1e-9)
+    assert odo.update(per_m * 0.01, 0.0) is True            # repeated stamp
+    assert odo.pose[0] == pytest.approx(0.11, abs=1e-12)
+    assert odo.twist[0] == pytest.approx(1.0, rel=1e-9)
+    assert np.all(np.isfinite(odo.twist_covariance))
+    odo.update(per_m * 0.02, 0.01)
+    t = [-0.04, -0.03, -0.02, -0.01, 0.0, 0.01]
+    x = [-0.04, -0.03, -0.02, -0.01, 0.0, 0.02]
+    assert odo.twist[0] == pytest.approx(np.polyfit(t, x, 1)[0], rel=1e-6)
