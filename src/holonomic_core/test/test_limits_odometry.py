@@ -261,6 +261,14 @@ def test_a_zero_twist_window_is_valid_and_uses_the_last_two_readings():
     odo.update(q1, 0.01)
     odo.update(q1 * 4.0, 0.02)
     assert odo.twist[0] == pytest.approx(3.0, rel=1e-9)
+    # with a window, the third reading is fitted with both earlier ones: the
+    # line through (0, 0), (0.01, 0.01), (0.02, 0.04) has slope
+    # sum (t - 0.01)(x - x_mean) / sum (t - 0.01)^2 = 0.0004 / 0.0002 = 2 m/s
+    odo = Odometry(model, twist_window=0.05)
+    odo.update(np.zeros(3), 0.0)
+    odo.update(q1, 0.01)
+    odo.update(q1 * 4.0, 0.02)
+    assert odo.twist[0] == pytest.approx(2.0, rel=1e-9)
 
 
 def _sums(n):
@@ -293,6 +301,9 @@ def test_heading_drift_from_translation_swings_the_position_across_the_track():
     # the encoder path drives 1 m to ~1e-6 (sub-stepped inverse kinematics)
     np.testing.assert_allclose(odo.pose_covariance, expected, rtol=1e-4, atol=1e-12)
     assert odo.distance == pytest.approx(1.0, rel=1e-5)
+    # the drive() path ends 1.3e-4 m off the diagonal (measured; sub-stepped
+    # inverse kinematics of the turning turret): 5e-4
+    np.testing.assert_allclose(odo.pose, [s, s, 0.0], atol=5e-4)
 
 
 def test_heading_variance_per_radian_counts_a_clockwise_turn_too():
@@ -389,6 +400,10 @@ def test_a_new_odometry_reports_rest_and_uses_the_last_two_readings():
     assert odo.slip == 0.0 and odo.residual.size == 0
     np.testing.assert_array_equal(odo.rate_twist, np.zeros(3))
     np.testing.assert_array_equal(odo.twist, np.zeros(3))
+    # the twist covariance before any motion: the noise floor of each axis
+    np.testing.assert_array_equal(np.diag(odo.twist_covariance), OdometryNoise().twist_variance)
+    # the first reading is only the reference: nothing integrated
+    assert odo.update(np.zeros(len(odo.model.joint_names)), 0.0) is False
 
 
 def test_a_repeated_stamp_moves_the_pose_but_not_the_twist_or_its_window():
@@ -406,7 +421,10 @@ def test_a_repeated_stamp_moves_the_pose_but_not_the_twist_or_its_window():
     for k in range(11):                                     # t = -0.10 .. 0.00
         odo.update(per_m * (k - 10) * 0.01, (k - 10) * 0.01)
     assert odo.twist[0] == pytest.approx(1.0, rel=1e-9)
+    np.testing.assert_allclose(odo.rate_twist, [1.0, 0.0, 0.0], atol=1e-9)
     assert odo.update(per_m * 0.01, 0.0) is True            # repeated stamp
+    # no time elapsed: no slip term (rho^2 dt = 0), and HAMR adds nothing else
+    np.testing.assert_array_equal(odo.pose_covariance, np.zeros((3, 3)))
     assert odo.pose[0] == pytest.approx(0.11, abs=1e-12)
     assert odo.twist[0] == pytest.approx(1.0, rel=1e-9)
     assert np.all(np.isfinite(odo.twist_covariance))
