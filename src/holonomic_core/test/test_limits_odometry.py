@@ -432,3 +432,14 @@ def test_a_repeated_stamp_moves_the_pose_but_not_the_twist_or_its_window():
     t = [-0.04, -0.03, -0.02, -0.01, 0.0, 0.01]
     x = [-0.04, -0.03, -0.02, -0.01, 0.0, 0.02]
     assert odo.twist[0] == pytest.approx(np.polyfit(t, x, 1)[0], rel=1e-6)
+
+
+def test_the_noise_model_cannot_be_changed_under_a_running_odometry():
+    """Odometry copies the coefficients once (the compiled path's arrays):
+    a noise model changed afterwards would make the two paths disagree, so
+    it is frozen."""
+    import dataclasses
+
+    noise = OdometryNoise()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        noise.slip_position_gain = 1.0
