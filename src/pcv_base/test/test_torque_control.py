@@ -242,3 +242,155 @@ def test_derived_g_dot_matches_a_numeric_derivative():
             plus, minus = dyn._caster_jacobians(i, phi + h), dyn._caster_jacobians(i, phi - h)
             assert d_fork == pytest.approx((plus[0] - minus[0]) / (2 * h), abs=1e-6)
             assert d_wheel == pytest.approx((plus[1] - minus[1]) / (2 * h), abs=1e-6)
+
+
+# --- eqs. 5, 6 and the torque limits by hand, on a dynamics of known mass ---
+
+class _KnownMass:
+    """Lambda = diag(mass), mu = bias, and a distribution that gives the
+    wrench itself as three "joint torques": eqs. 5-6 by hand, nothing else."""
+
+    def __init__(self, mass=(2.0, 2.0, 0.5), bias=(0.0, 0.0, 0.0)):
+        self.mass, self.bias = np.diag(mass), np.array(bias)
+
+    def terms(self, positions, twist):
+        return self.mass, self.bias
+
+    def torque_distribution(self, positions, wrench):
+        return np.array(wrench, dtype=float)
+
+
+def _osc(kp=4.0, kv=2.0, max_efforts=(100.0, 100.0, 100.0), **kw):
+    cfg = load_config("xr4000", {})
+    return OperationalSpaceController(cfg.model, kp, kv, max_efforts, dynamics=_KnownMass(**kw))
+
+
+def test_a_new_or_reset_controller_holds_a_reference_at_rest():
+    """Before the first cycle: the reference at rest at the origin, no
+    wrench. After reset(pose): at rest at that pose, so a base standing
+    there has no error at all."""
+    osc = _osc()
+    e_pose, e_twist = osc.errors((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    np.testing.assert_array_equal(e_pose, np.zeros(3))
+    np.testing.assert_array_equal(e_twist, np.zeros(3))
+    np.testing.assert_array_equal(osc.wrench, np.zeros(3))
+    osc.step(None, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.5, 0.0, 0.0), 0.1)
+    osc.reset((1.0, 2.0, 0.5))
+    e_pose, e_twist = osc.errors((1.0, 2.0, 0.5), (0.0, 0.0, 0.0))
+    np.testing.assert_allclose(e_pose, np.zeros(3), atol=1e-15)
+    np.testing.assert_array_equal(e_twist, np.zeros(3))
+
+
+def test_the_pd_law_in_base_link_by_hand():
+    """Reference at rest at the origin; base at (0.1, -0.05, 0.02) moving at
+    vx = 0.2. The error x - x_d in base_link: the world offset (0.1, -0.05)
+    turned by -0.02 rad, e = (0.1 c - 0.05 s, -0.1 s - 0.05 c, 0.02) with
+    c, s = cos, sin 0.02; twist error (0.2, 0, 0); no reference
+    acceleration. F* = -Kp e - Kv e_dot (eq. 6), F = Lambda F* + mu (eq. 5)
+    with Lambda = diag(2, 2, 0.5), mu = (1, -1, 0.5)."""
+    osc = _osc(kp=(4.0, 3.0, 5.0), kv=2.0, bias=(1.0, -1.0, 0.5))
+    osc.reset((0.0, 0.0, 0.0))
+    c, s = math.cos(0.02), math.sin(0.02)
+    e = np.array([0.1 * c - 0.05 * s, -0.1 * s - 0.05 * c, 0.02])
+    e_pose, e_twist = osc.errors((0.1, -0.05, 0.02), (0.2, 0.0, 0.0))
+    np.testing.assert_allclose(e_pose, e, atol=1e-15)
+    np.testing.assert_allclose(e_twist, [0.2, 0.0, 0.0], atol=1e-15)
+    torques = osc.step(None, (0.1, -0.05, 0.02), (0.2, 0.0, 0.0), (0.0, 0.0, 0.0), 0.01)
+    f_star = -np.array([4.0, 3.0, 5.0]) * e - 2.0 * np.array([0.2, 0.0, 0.0])
+    expected = np.diag([2.0, 2.0, 0.5]) @ f_star + np.array([1.0, -1.0, 0.5])
+    np.testing.assert_allclose(osc.wrench, expected, rtol=1e-12)
+    np.testing.assert_allclose(torques, expected, rtol=1e-12)
+
+
+def test_the_reference_twist_is_seen_from_the_base_frame():
+    """Reference at (1, 1, pi/2) moving at body vx = 1 (i.e. +y in odom); the
+    base at (1, 0, 0) at rest. In base_link the reference is 1 m to the left
+    (e = (0, -1, -pi/2)) and its twist points along the base's +y: e_dot =
+    0 - (0, 1, 0) after turning by rth - pth = pi/2."""
+    osc = _osc()
+    # set directly: track() would pull a reference this far to MAX_ERROR
+    osc.ref_pose = np.array([1.0, 1.0, math.pi / 2])
+    osc.ref_twist = np.array([1.0, 0.0, 0.0])
+    e_pose, e_twist = osc.errors((1.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    np.testing.assert_allclose(e_pose, [0.0, -1.0, -math.pi / 2], atol=1e-15)
+    np.testing.assert_allclose(e_twist, [0.0, -1.0, 0.0], atol=1e-15)
+
+
+def test_the_reference_advances_by_the_mean_twist_and_feeds_forward_its_change():
+    """dt = 0.1 s, the commanded twist from rest to vx = 1: the reference pose
+    moves by the mean twist 0.5 m/s x 0.1 s = 0.05 m; the feed-forward
+    x_ddot_d = (1 - 0) / 0.1 = 10 m/s^2, so with the base exactly on the
+    reference (pose (0.05, 0, 0), twist (1, 0, 0)) F = Lambda (10, 0, 0)."""
+    osc = _osc()
+    osc.reset((0.0, 0.0, 0.0))
+    osc.step(None, (0.05, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.1)
+    np.testing.assert_allclose(osc.ref_pose, [0.05, 0.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(osc.ref_twist, [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(osc.wrench, [20.0, 0.0, 0.0], atol=1e-12)
+    # a given acceleration (a trajectory) replaces the difference: the
+    # twist holds at vx = 1, the reference moves 0.1 m more, F = Lambda (0, 0, 3)
+    osc.step(None, (0.15, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.1,
+             reference_acceleration=(0.0, 0.0, 3.0))
+    np.testing.assert_allclose(osc.ref_pose, [0.15, 0.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(osc.wrench, [0.0, 0.0, 1.5], atol=1e-12)
+
+
+def test_a_base_held_far_off_pulls_the_reference_to_max_error():
+    """Base 1 m ahead of and 0.5 rad from a reference at rest at the origin:
+    the position and heading errors are clipped to MAX_ERROR (0.15 m,
+    0.3 rad) in F* (F*_x = -Kp 0.15, F*_th = -Kp 0.3), and the reference is
+    pulled to the base minus the clipped error: compose((1, 0, 0.5),
+    (-0.15, 0, -0.3)) = (1 - 0.15 cos 0.5, -0.15 sin 0.5, 0.2)."""
+    osc = _osc(kp=4.0, kv=0.0, mass=(1.0, 1.0, 1.0))
+    osc.reset((0.0, 0.0, 0.0))
+    osc.track(None, (1.0, 0.0, 0.5), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+              (0.0, 0.0, 0.0))
+    # e_y = -sin(0.5) * 1 m, beyond 0.15 too: clipped to -0.15 -> F*_y = +0.6
+    np.testing.assert_allclose(osc.wrench, [-0.6, 0.6, -1.2], atol=1e-12)
+    # e in base_link: (cos 0.5, -sin 0.5, 0.5), clipped to (0.15, -0.15, 0.3)
+    np.testing.assert_allclose(osc.ref_pose, [1 - 0.15 * math.cos(0.5) - 0.15 * math.sin(0.5),
+                                              -0.15 * math.sin(0.5) + 0.15 * math.cos(0.5),
+                                              0.2], atol=1e-12)
+    e_pose, _ = osc.errors((1.0, 0.0, 0.5), (0.0, 0.0, 0.0))
+    np.testing.assert_allclose(e_pose, [0.15, -0.15, 0.3], atol=1e-12)
+    # within MAX_ERROR (exactly at it included) the reference is left alone
+    before = osc.ref_pose.copy()
+    osc.track(None, (1.0, 0.0, 0.5), (0.0, 0.0, 0.0), before, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    np.testing.assert_array_equal(osc.ref_pose, before)
+
+
+@pytest.mark.parametrize("wrench,expected", [
+    ((4.0, -2.0, 1.0), (1.0, -0.5, 0.25)),          # worst 4x the limit: all / 4
+    ((1.5, -0.75, 0.3), (1.0, -0.5, 0.2)),          # worst 1.5x: all / 1.5
+    ((1.0, -0.5, 0.25), (1.0, -0.5, 0.25)),         # exactly at the limit: unchanged
+    ((0.5, 0.2, -0.1), (0.5, 0.2, -0.1)),           # within: unchanged
+    ((np.nan, 0.0, 0.0), (0.0, 0.0, 0.0)),          # NaN: no torque at all
+    ((np.inf, 0.0, 0.0), (0.0, 0.0, 0.0)),
+])
+def test_torques_are_scaled_together_into_the_limits(wrench, expected):
+    osc = _osc(max_efforts=(1.0, 1.0, 1.0))
+    np.testing.assert_allclose(osc.distribute(None, np.array(wrench)), expected, atol=1e-15)
+
+
+def test_the_pinv_distribution_produces_the_wrench_with_least_torque():
+    """pinv(C)^T F: F = C^T Gamma (the torques make the wrench) and Gamma is
+    in the row space of C^T (the minimum-norm solution, orthogonal to C^T's
+    null space)."""
+    cfg = load_config("xr4000", {})
+    osc = OperationalSpaceController(cfg.model, 1.0, 1.0, np.full(len(cfg.model.joint_names), 1e3),
+                                     dynamics=_KnownMass(), distribution="pinv")
+    q = np.zeros(len(cfg.model.joint_names))
+    C = cfg.model.kinematics.constraint_matrix(q)
+    wrench = np.array([3.0, -1.0, 0.5])
+    torques = osc.distribute(q, wrench)
+    np.testing.assert_allclose(C.T @ torques, wrench, atol=1e-9)
+    # minimum norm: no component in the null space of C^T
+    null = np.linalg.svd(C.T)[2][3:]
+    np.testing.assert_allclose(null @ torques, 0.0, atol=1e-9)
+
+
+def test_an_unknown_distribution_is_refused():
+    cfg = load_config("xr4000", {})
+    with pytest.raises(ValueError, match="distribution"):
+        OperationalSpaceController(cfg.model, 1.0, 1.0, np.ones(8), dynamics=_KnownMass(),
+                                   distribution="even")
