@@ -444,8 +444,8 @@ integrate_into(double *pose, double *P, const double *disp, double slip2_dt, con
     double dist = hypot(dx, dy);
     double var_lin = noise[0] * dist + noise[3] * slip2_dt;
     double var_ang = noise[1] * fabs(dth) + noise[2] * dist + noise[4] * slip2_dt;
-    if (var_lin == 0.0 && var_ang == 0.0)
-        return dist;
+    /* no shortcut when the step adds no noise: F P F^T still swings the
+       heading variance already accumulated into the position */
     double fa = -wy, fb = wx;
     double p00 = P[0], p01 = P[1], p02 = P[2], p11 = P[3], p12 = P[4], p22 = P[5];
     P[0] = p00 + 2.0 * fa * p02 + fa * fa * p22 + var_lin;

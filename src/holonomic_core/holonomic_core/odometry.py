@@ -296,8 +296,8 @@ class Odometry:
         var_lin = n.linear_variance_per_meter * dist + n.slip_position_gain * slip2_dt
         var_ang = (n.angular_variance_per_radian * abs(dth) + n.angular_variance_per_meter * dist
                    + n.slip_heading_gain * slip2_dt)
-        if var_lin == 0.0 and var_ang == 0.0:
-            return
+        # (no shortcut when the step adds no noise: F P F^T still swings the
+        # heading variance already accumulated into the position)
         # P' = F P F^T + G Q G^T with F = [[1, 0, -wy], [0, 1, wx], [0, 0, 1]]
         # (the world displacement depends on the heading) and G the rotation
         # to odom; Q = diag(var_lin, var_lin, var_ang) is isotropic in x, y,

@@ -319,6 +319,31 @@ def test_heading_variance_per_radian_counts_a_clockwise_turn_too():
     np.testing.assert_allclose(odo.pose_covariance, expected, rtol=1e-5, atol=1e-12)
 
 
+def test_heading_uncertainty_swings_the_position_on_a_step_that_adds_no_noise():
+    """A heading variance s2 already accumulated (a turn on the spot, per-radian
+    term only) must carry into the position on a straight run that adds no
+    noise of its own (equal wheel increments, turret still: dtheta exactly 0,
+    no per-metre term). Each step's F = I + E with E non-zero only in the
+    heading column (-wy, wx); E_i E_j = 0, so the steps compose to one F with
+    (-Dy, Dx) and P' = F P F^T: p00 = Dy^2 s2, p11 = Dx^2 s2, p01 = -Dx Dy s2,
+    p02 = -Dy s2, p12 = Dx s2, p22 = s2. (The update once returned early on a
+    step with no added noise and left the position variance at 0.)"""
+    model = load_model("hamr")
+    odo = Odometry(model, noise=_noise(angular_variance_per_radian=1e-2))
+    odo.update(np.zeros(3), 0.0)
+    q, t = drive(model, odo, np.zeros(3), np.array([0.0, 0.0, 1.0]), 1.0)
+    s2 = odo.pose_covariance[2, 2]
+    assert s2 == pytest.approx(1e-2, rel=1e-5)
+    start = odo.pose.copy()
+    for k in range(100):                     # 5 cm of wheel a step: 0.31 m in all
+        q = q + np.array([0.05, 0.05, 0.0])
+        odo.update(q, t + 0.01 * (k + 1))
+    dx, dy = odo.pose[:2] - start[:2]
+    assert odo.pose[2] == start[2] and math.hypot(dx, dy) > 0.3
+    expected = s2 * np.array([[dy * dy, -dx * dy, -dy], [-dx * dy, dx * dx, dx], [-dy, dx, 1.0]])
+    np.testing.assert_allclose(odo.pose_covariance, expected, rtol=1e-9, atol=1e-15)
+
+
 def test_the_unexplained_contact_velocity_grows_pose_and_twist_variance():
     """XR4000 (8 joints, 3 dof): one wheel turns 0.02 rad more than a rigid
     base allows in 0.01 s. slip = RMS of the residual over its entries; one
