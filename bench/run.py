@@ -317,8 +317,10 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     asks the normal scheduler for a 0.1 ms time slice (`loop.slice`, Linux 6.12+), so its
     wake-ups preempt those processes instead of waiting for their 1.4 ms slices to end; the
     node publishes its three 1 kHz topics as pre-serialized messages (about 40 % less CPU
-    per cycle). Both came after the 14:06 rows (docs/realtime.md has their A/B on the
-    loaded machine: wake-up lateness p99 cut by 43-74 % in seven pairs of eight). What a
+    per cycle). The 16:37 rows have both (idle, against the 14:01 rows without them: HAMR
+    p99 1.603 -> 1.464 ms, max 7.0 -> 4.9 ms, periods over 5 ms 1 -> 0; docs/realtime.md
+    has their A/B on the loaded machine: wake-up lateness p99 cut by 43-74 % in seven pairs
+    of eight). What a
     slice cannot change: the loop's share of the CPU when other processes want more
     than two cores, and this VM's kernel, which is not preemptible (`Dynamic Preempt:
     none` at boot): a wake-up waits until the running process leaves the kernel;
@@ -326,10 +328,20 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     same priority (the other runs' loop processes): a few periods over 2 ms a minute,
     woken late, for the same reason or behind those loops; 50-52 ms preemptions are the
     kernel's real-time throttling (950 ms of real-time per second, `sched_rt_runtime_us`);
-  * *the XR4000 in torque mode* is physics-bound: pybullet with the drive model steps in the
-    cycle: the `controller` part p99 0.8-0.9 ms of the 1 ms period with SCHED_FIFO (the
-    control cycle itself 0.02 ms), the loop process at 71-73 % of a core with SCHED_FIFO; a physics
-    process of its own would be the next step (docs/realtime.md);
+  * *the XR4000 in torque mode*: with the physics in the loop process, pybullet and the drive
+    model step inside each cycle (the `controller` part); with `sim.physics_process` (its own
+    rows) the physics runs in a process of its own (SCHED_FIFO 49 below a real-time loop), as
+    the plant does on a robot, and the cycle is the operational-space torque law (87 µs a call
+    since it runs on floats instead of small numpy arrays: `python bench/torque_law.py`). With
+    SCHED_FIFO the remaining periods over 2 ms of both rows are single `compute` spikes of
+    12-17 ms in the controller part (one or two a minute; not traced: the process has no page
+    faults, its collector is off); without real-time priority three 1 kHz processes (loop,
+    physics, node) share two cores;
+  * *command latency*: the loop takes a command at the start of its next cycle, on average half
+    a period (0.5 ms at 1 kHz) after the node forwards it, so the end-to-end time is about the
+    DDS hop + 0.5 ms + the forwarding: the ratio to DDS one-way rises when DDS is fast (0.53-0.73
+    ms one-way on the idle machine at 16:39 against 0.88 ms at the previous measurement: 2.03-2.4×
+    for an end-to-end p50 of 1.1-1.5 ms, about the same as before);
   * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz; on a loaded
     machine the node and the bench's own subscriber fall behind (fewer than 1000
     joint_states a second received), and the outside periods then measure the publishing
@@ -352,8 +364,9 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   benchmark also checks that both controllers end with the same joint commands and pose.
   `python bench/run.py --only compute` re-runs these two rows alone.
 - **1 kHz loop** (`python bench/run.py --only loop` re-runs these rows and the latency):
-  `holonomic-bringup hamr --driver mock` and `holonomic-bringup xr4000 --driver sim -p
-  control_mode:=torque` with `-p control_rate:=1000.0 -p publish_rate:=1000.0`, each once with
+  `holonomic-bringup hamr --driver mock`, `holonomic-bringup xr4000 --driver sim -p
+  control_mode:=torque` and the same with `-p sim.physics_process:=true` (the physics in a
+  process of its own), with `-p control_rate:=1000.0 -p publish_rate:=1000.0`, each once with
   `-p loop.realtime:=false` (the normal scheduler with the default `loop.slice`, 0.1 ms)
   and once with the default (SCHED_FIFO 50 and mlockall where permitted; the row names
   the policy and slice the loop got), 60 s each, as their own processes; this
