@@ -198,15 +198,37 @@ class EmulatedOdriveAxis(EmulatedDevice):
     axis answers late); ``inject_error(bits)`` -- a condition that disarms
     the axis and persists until ``clear_condition()``; after that a
     Clear_Errors from the host clears the latched error.
+
+    The axis watchdog (``enable_watchdog``, ``watchdog_timeout`` [s]), as
+    each firmware line has it:
+
+    * 0.5 (its open source: can_simple.cpp feeds the addressed axis on every
+      frame, main.cpp checks every axis in every state): any frame to the
+      axis feeds it; when it expires, WATCHDOG_TIMER_EXPIRED is latched even
+      in IDLE;
+    * 0.6 (closed source; ODrive's CAN examples): Set_Input_Vel,
+      Set_Input_Torque and Set_Axis_State feed it; it disarms an axis in
+      closed-loop control.
+
+    Firmware 0.6 also answers Get_Version (``version``) and, given
+    ``endpoints`` (an :class:`~holonomic_drivers.odrive_endpoints.EndpointFile`),
+    RxSdo reads and writes of the two watchdog endpoints by their ids; a
+    write is confirmed from firmware 0.6.11 on, as ODrive's examples say.
+    Unknown ids get no answer. ``watchdog_expired`` is (fed at, detected at)
+    [s, wall clock] of the last expiry.
     """
 
     def __init__(self, node_id: int, channel: str, heartbeat_period: float = 0.1,
                  encoder_period: float = 0.01, max_acceleration: float = 200.0,
-                 watchdog_timeout: float = 0.0, motor=None, firmware: str = "0.6"):
-        """Periods [s]; ``watchdog_timeout`` [s] > 0: no setpoint for that long
-        in closed loop -> WATCHDOG_TIMER_EXPIRED (the ODrive's axis watchdog);
-        ``motor``: see the module docstring (default: an ideal motor that
-        ramps at ``max_acceleration`` [rev/s^2])."""
+                 watchdog_timeout: float = 0.0, motor=None, firmware: str = "0.6",
+                 enable_watchdog: bool | None = None, endpoints=None,
+                 version: proto.Version | None = None):
+        """Periods [s]; ``watchdog_timeout`` [s]: the axis watchdog (see the
+        class docstring), enabled by ``enable_watchdog`` (default: when the
+        timeout is > 0); ``motor``: see the module docstring (default: an
+        ideal motor that ramps at ``max_acceleration`` [rev/s^2]);
+        ``version``: what Get_Version answers (0.6; default firmware 0.6.11
+        on an ODrive Pro, board 4.4.58)."""
         super().__init__(channel, max_acceleration, motor)
         if firmware not in proto.FIRMWARES:
             raise ValueError(f"firmware {firmware!r} not one of {proto.FIRMWARES}")
@@ -215,6 +237,13 @@ class EmulatedOdriveAxis(EmulatedDevice):
         self.heartbeat_period = heartbeat_period
         self.encoder_period = encoder_period
         self.watchdog_timeout = watchdog_timeout
+        self.enable_watchdog = watchdog_timeout > 0 if enable_watchdog is None \
+            else bool(enable_watchdog)
+        self.version = version or proto.Version(2, (4, 4, 58), (0, 6, 11))
+        #: endpoint id -> (attribute, type) of what RxSdo can reach
+        self._endpoints = {} if endpoints is None else {
+            e.id: (e.path.rsplit(".", 1)[1], e.type) for e in endpoints.endpoints.values()}
+        self.watchdog_expired: tuple[float, float] | None = None
         self.axis_state = AxisState.IDLE
         self.control_mode = ControlMode.VELOCITY_CONTROL
         self.input_mode = proto.InputMode.PASSTHROUGH
@@ -258,6 +287,14 @@ class EmulatedOdriveAxis(EmulatedDevice):
         if node != self.node_id or msg.is_extended_id:
             return
         data = bytes(msg.data)
+        if self.firmware == "0.5":
+            self._last_input = now       # any frame to the axis feeds 0.5's watchdog
+        elif cmd == Cmd.GET_VERSION and (msg.is_remote_frame or not data):
+            self.send(proto.frame_id(self.node_id, Cmd.GET_VERSION), self.version.encode())
+            return
+        elif cmd == Cmd.RX_SDO and not msg.is_remote_frame:
+            self._sdo(data)
+            return
         if msg.is_remote_frame:
             if cmd == Cmd.GET_ENCODER_ESTIMATES:
                 self._send_estimates()
@@ -289,10 +326,36 @@ class EmulatedOdriveAxis(EmulatedDevice):
         except (struct.error, ValueError):
             pass    # a real ODrive ignores malformed frames too
 
+    def _sdo(self, data: bytes) -> None:
+        """RxSdo: read or write one of the endpoints this axis knows."""
+        try:
+            opcode, endpoint_id, _ = struct.unpack_from("<BHB", data)
+        except struct.error:
+            return
+        if endpoint_id not in self._endpoints:
+            return
+        name, kind = self._endpoints[endpoint_id]
+        if opcode == proto.SDO_WRITE:
+            try:
+                setattr(self, name, proto.decode_value(kind, data[4:]))
+            except ValueError:
+                return
+            if self.version.fw < (0, 6, 11):
+                return
+        elif opcode != proto.SDO_READ:
+            return
+        reply = proto.SdoReply(endpoint_id, proto.encode_value(kind, getattr(self, name)))
+        self.send(proto.frame_id(self.node_id, Cmd.TX_SDO), reply.encode())
+
     def command_motor(self, now: float) -> None:
-        if (self.axis_state == AxisState.CLOSED_LOOP_CONTROL and self.watchdog_timeout > 0
+        # 0.5 checks the watchdog in every state, 0.6 (as emulated) in closed loop
+        if (self.enable_watchdog and self.watchdog_timeout > 0
+                and (self.firmware == "0.5" or self.axis_state == AxisState.CLOSED_LOOP_CONTROL)
                 and now - self._last_input > self.watchdog_timeout):
-            self._disarm(proto.WATCHDOG_TIMER_EXPIRED[self.firmware])
+            bit = proto.WATCHDOG_TIMER_EXPIRED[self.firmware]
+            if not self.disarm_reason & bit:
+                self.watchdog_expired = (self._last_input, now)
+            self._disarm(bit)
         if self.axis_state != AxisState.CLOSED_LOOP_CONTROL:
             self.motor.command_velocity(0.0)
         elif self.control_mode == ControlMode.TORQUE_CONTROL:

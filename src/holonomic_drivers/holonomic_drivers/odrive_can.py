@@ -19,6 +19,24 @@ Safety logic (all checks run in ``read``, i.e. every control cycle):
   clear or the axis does not reach closed-loop control within
   ``startup_timeout``.
 
+The axis watchdog (the drive stops by itself when this controller dies or
+hangs) is checked at configure, per axis (:mod:`holonomic_drivers.odrive_watchdog`):
+
+* firmware 0.6 with ``odrive_can.endpoints`` (the drives' flat_endpoints.json):
+  Get_Version must match the file, then ``axis0.config.enable_watchdog`` and
+  ``watchdog_timeout`` are read over RxSdo/TxSdo -- after writing them when
+  ``odrive_can.set_watchdog`` > 0;
+* firmware 0.6 without the file: unknown (no endpoint ids, nothing to read);
+* firmware 0.5 (no endpoint access): probed with the motors idle -- 0.5 feeds
+  an axis's watchdog with any frame addressed to it and raises
+  WATCHDOG_TIMER_EXPIRED even in IDLE, so the driver stays silent towards the
+  axes and times the bit's appearance in their heartbeats.
+
+An axis whose watchdog is off, unknown, longer than
+``odrive_can.max_watchdog_timeout`` or shorter than three control periods is
+a warning (stderr and ``status``) or, with ``watchdog_check: refuse``, a
+refusal to arm (DriverFault, one line).
+
 The bus is drained without blocking at the start of every ``read`` (no
 receive thread): what the drives sent before the cycle is what the cycle
 sees. Frames that cannot be decoded are ignored and counted.
@@ -26,15 +44,18 @@ sees. Frames that cannot be decoded are ignored and counted.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from holonomic_core.driver import DriverCommunicationError, DriverFault, JointReading
 from holonomic_core.schema import ConfigError, ParamSpec
+from holonomic_drivers import odrive_endpoints
 from holonomic_drivers import odrive_protocol as proto
+from holonomic_drivers import odrive_watchdog as wd
 from holonomic_drivers.can_link import CanDriver, bus_specs, joint_map_specs, open_bus
 from holonomic_drivers.odrive_protocol import AxisState, Cmd, ControlMode, InputMode
 
@@ -42,6 +63,10 @@ PREFIX = "odrive_can"
 #: frames handled per read at most: a flooded bus cannot stall the loop
 MAX_FRAMES_PER_READ = 2000
 _INPUT_MODES = {"passthrough": InputMode.PASSTHROUGH, "vel_ramp": InputMode.VEL_RAMP}
+#: while arming, zero velocity is resent this often [s]: it feeds the axis
+#: watchdogs until the heartbeats confirm closed-loop control
+ARM_FEED_PERIOD = 0.02
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -54,6 +79,15 @@ class _Axis:
     position_rev: float = math.nan
     velocity_rev_per_s: float = math.nan
     estimate_time: float = -math.inf
+    version: proto.Version | None = None
+    #: endpoint id -> (raw value, how many replies so far)
+    sdo: dict[int, tuple[bytes, int]] = field(default_factory=dict)
+    #: when set: (stamp, axis error) of every heartbeat stamped after it
+    probe_since: float | None = None
+    probe: list[tuple[float, int]] | None = None
+    #: the last frame sent to the axis [s, driver clock] (it feeds 0.5's watchdog)
+    last_sent: float = -math.inf
+    watchdog: wd.Verdict | None = None
 
 
 class OdriveCanDriver(CanDriver):
@@ -81,6 +115,13 @@ class OdriveCanDriver(CanDriver):
                 raise ConfigError(f"{PREFIX}.joints.{joint}.node_id", node,
                                   f"0..{highest} on firmware {self.firmware} (0x3F is the "
                                   "broadcast address of 0.6.x)")
+        self._watchdog_policy = params[f"{PREFIX}.watchdog_check"]
+        self._watchdog_bound = float(params[f"{PREFIX}.max_watchdog_timeout"])
+        self._set_watchdog = float(params[f"{PREFIX}.set_watchdog"])
+        self._sdo_timeout = float(params[f"{PREFIX}.sdo_timeout"])
+        self._endpoints = self._load_endpoints(params)
+        #: messages a user must see (also in ``status``)
+        self.warnings: list[str] = []
         self._bus = None
         #: the control mode the axes were last told (per axis)
         self._mode = [ControlMode.VELOCITY_CONTROL] * len(self._axes)
@@ -115,7 +156,49 @@ class OdriveCanDriver(CanDriver):
             ParamSpec(f"{PREFIX}.poll_encoders", "bool",
                       "Request the encoder estimates every cycle (remote frame) instead of "
                       "relying on the axes' cyclic messages.", default=False),
+            ParamSpec(f"{PREFIX}.watchdog_check", "string",
+                      "What an axis whose watchdog is off, unknown, longer than "
+                      "max_watchdog_timeout or shorter than three control periods does: "
+                      "refuse (arming fails, naming the axis) or warn (stderr and "
+                      "diagnostics; the motor would NOT stop if this controller died).",
+                      default="warn", choices=wd.POLICIES),
+            ParamSpec(f"{PREFIX}.max_watchdog_timeout", "double",
+                      "Longest axis watchdog timeout accepted [s]: how long a motor may "
+                      "keep its last command after this controller dies or hangs.",
+                      default=0.3, minimum=0.01, maximum=10.0),
+            ParamSpec(f"{PREFIX}.set_watchdog", "double",
+                      "Firmware 0.6 with an endpoints file: write this axis watchdog "
+                      "timeout [s] and enable the watchdog at configure (RAM only, not "
+                      "saved on the drive); 0 leaves the drive's setting alone.",
+                      default=0.0, minimum=0.0, maximum=10.0),
+            ParamSpec(f"{PREFIX}.endpoints", "string",
+                      "Firmware 0.6: the flat_endpoints.json of the drives' firmware and "
+                      "board (ODrive publishes one per release and board), to read the "
+                      "axis watchdog settings over CAN; empty = they cannot be read.",
+                      default=""),
+            ParamSpec(f"{PREFIX}.sdo_timeout", "double",
+                      "Time a drive has to answer Get_Version or an endpoint read [s].",
+                      default=0.2, minimum=0.005, maximum=10.0),
         ] + joint_map_specs(PREFIX, model.joint_names, (0, proto.MAX_NODE_ID))
+
+    def _load_endpoints(self, params) -> odrive_endpoints.EndpointFile | None:
+        key, path = f"{PREFIX}.endpoints", params[f"{PREFIX}.endpoints"]
+        if self._set_watchdog > self._watchdog_bound:
+            raise ConfigError(f"{PREFIX}.set_watchdog", self._set_watchdog,
+                              f"at most {PREFIX}.max_watchdog_timeout "
+                              f"({self._watchdog_bound:g} s)")
+        if not path:
+            if self._set_watchdog > 0:
+                raise ConfigError(f"{PREFIX}.set_watchdog", self._set_watchdog,
+                                  f"0 without {key} (the endpoint ids come from that file)")
+            return None
+        if self.firmware != "0.6":
+            raise ConfigError(key, path, f"empty on firmware {self.firmware} (no endpoint "
+                                         "access over CAN before 0.6)")
+        try:
+            return odrive_endpoints.load(path)
+        except (OSError, ValueError) as exc:
+            raise ConfigError(key, path, f"an ODrive flat_endpoints.json ({exc})") from None
 
     # -- lifecycle hooks ----------------------------------------------------------
     def _on_configure(self) -> None:
@@ -146,11 +229,17 @@ class OdriveCanDriver(CanDriver):
                     ControlMode.VELOCITY_CONTROL, self._input_mode))
                 self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
                 self._send(node, Cmd.SET_AXIS_STATE, proto.set_axis_state(AxisState.IDLE))
+            self._check_watchdogs()
         except BaseException:
             self._shutdown_bus()
             raise
 
     def _on_activate(self) -> None:
+        if self._watchdog_policy == "refuse":
+            for i, axis in enumerate(self._axes):
+                if not axis.watchdog.ok:
+                    raise DriverFault(f"axis watchdog {axis.watchdog.text}: refused to arm "
+                                      f"({PREFIX}.watchdog_check: refuse)", self.devices[i])
         # only heartbeats sent after the request count
         seen = [a.heartbeats for a in self._axes]
         self._mode = [ControlMode.VELOCITY_CONTROL] * len(self._axes)
@@ -162,8 +251,13 @@ class OdriveCanDriver(CanDriver):
             self._send(node, Cmd.SET_AXIS_STATE,
                        proto.set_axis_state(AxisState.CLOSED_LOOP_CONTROL))
         deadline = time.monotonic() + self._startup_timeout
+        next_feed = time.monotonic() + ARM_FEED_PERIOD
         while True:
             self._drain()
+            if time.monotonic() >= next_feed:
+                next_feed += ARM_FEED_PERIOD
+                for node in self.joints.node_ids:
+                    self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
             waiting = [i for i, a in enumerate(self._axes) if not (
                 a.heartbeats > seen[i] and not a.heartbeat.faulted
                 and a.heartbeat.axis_state == AxisState.CLOSED_LOOP_CONTROL)]
@@ -258,8 +352,116 @@ class OdriveCanDriver(CanDriver):
                 f"node {self.joints.node_ids[i]}: no heartbeat" if hb is None else
                 f"node {self.joints.node_ids[i]}: {_state_name(hb.axis_state)}, error "
                 f"{hb.describe(self.firmware)}, heartbeat "
-                f"{(now - axis.heartbeat_time) * 1e3:.0f} ms ago")
+                f"{(now - axis.heartbeat_time) * 1e3:.0f} ms ago") + (
+                f", watchdog {axis.watchdog.text}" if axis.watchdog else "")
+        for k, text in enumerate(self.warnings):
+            out[f"warning {k + 1}"] = text
         return out
+
+    # -- axis watchdog ------------------------------------------------------------------
+    def _check_watchdogs(self) -> None:
+        """Give every axis a :class:`~holonomic_drivers.odrive_watchdog.Verdict`;
+        warn about those that are not ok."""
+        if self.firmware == "0.5":
+            self._probe_watchdogs()
+        elif self._endpoints is None:
+            for axis in self._axes:
+                axis.watchdog = wd.Verdict(False, f"unknown (firmware 0.6 without {PREFIX}."
+                                           "endpoints: its settings cannot be read)")
+        else:
+            for i in range(len(self._axes)):
+                self._read_watchdog(i)
+        for i, axis in enumerate(self._axes):
+            if not axis.watchdog.ok:
+                text = (f"{self.devices[i]}: axis watchdog {axis.watchdog.text}: the motor "
+                        "will NOT stop by itself if this controller dies or hangs")
+                self.warnings.append(text)
+                _log.warning(text)
+
+    def _read_watchdog(self, i: int) -> None:
+        """Firmware 0.6: check the board against the endpoints file, write the
+        settings if asked, read them back."""
+        node, device, table = self.joints.node_ids[i], self.devices[i], self._endpoints
+        axis = self._axes[i]
+        axis.version = None
+        self._send(node, Cmd.GET_VERSION, b"")
+        self._await(lambda: axis.version is not None, device, "Get_Version")
+        why = table.mismatch(axis.version)
+        if why:
+            raise DriverFault(f"{why}: set {PREFIX}.endpoints to the file of this build",
+                              device)
+        enable = table.endpoints[odrive_endpoints.ENABLE_WATCHDOG]
+        timeout = table.endpoints[odrive_endpoints.WATCHDOG_TIMEOUT]
+        if self._set_watchdog > 0:
+            # the timeout first: the watchdog never runs with the old one
+            self._write_endpoint(i, timeout, self._set_watchdog)
+            self._write_endpoint(i, enable, True)
+        values = {e.path: self._read_endpoint(i, e) for e in (enable, timeout)}
+        axis.watchdog = wd.assess(bool(values[enable.path]), float(values[timeout.path]),
+                                  self._watchdog_bound, 1.0 / self.control_rate,
+                                  f"read over CAN, firmware {axis.version.fw_text}")
+
+    def _read_endpoint(self, i: int, endpoint: odrive_endpoints.Endpoint):
+        axis = self._axes[i]
+        before = axis.sdo.get(endpoint.id, (b"", 0))[1]
+        self._send(self.joints.node_ids[i], Cmd.RX_SDO,
+                   proto.sdo_request(proto.SDO_READ, endpoint.id))
+        self._await(lambda: axis.sdo.get(endpoint.id, (b"", 0))[1] > before, self.devices[i],
+                    f"the read of {endpoint.path} (endpoint {endpoint.id})")
+        try:
+            return proto.decode_value(endpoint.type, axis.sdo[endpoint.id][0])
+        except ValueError as exc:
+            raise DriverFault(f"{endpoint.path}: {exc}", self.devices[i]) from None
+
+    def _write_endpoint(self, i: int, endpoint: odrive_endpoints.Endpoint, value) -> None:
+        """Write, then read back (firmware before 0.6.11 does not confirm a
+        write; a later one does, which the read-back waits out)."""
+        axis = self._axes[i]
+        before = axis.sdo.get(endpoint.id, (b"", 0))[1]
+        self._send(self.joints.node_ids[i], Cmd.RX_SDO, proto.sdo_request(
+            proto.SDO_WRITE, endpoint.id, proto.encode_value(endpoint.type, value)))
+        if axis.version.fw >= (0, 6, 11):
+            self._await(lambda: axis.sdo.get(endpoint.id, (b"", 0))[1] > before,
+                        self.devices[i], f"the write of {endpoint.path}")
+        back = self._read_endpoint(i, endpoint)
+        if back != proto.decode_value(endpoint.type, proto.encode_value(endpoint.type, value)):
+            raise DriverFault(f"wrote {value} to {endpoint.path}, reads back {back}",
+                              self.devices[i])
+
+    def _await(self, done, device: str, what: str) -> None:
+        deadline = time.monotonic() + self._sdo_timeout
+        while True:
+            self._drain()
+            if done():
+                return
+            if time.monotonic() > deadline:
+                raise DriverCommunicationError(
+                    f"no answer to {what} within {self._sdo_timeout:g} s (firmware 0.6 "
+                    f"with {PREFIX}.endpoints of this firmware and board?)", device)
+            time.sleep(0.001)
+
+    def _probe_watchdogs(self) -> None:
+        """Firmware 0.5, motors idle: clear a latched watchdog error, send the
+        axes nothing for max_watchdog_timeout plus a heartbeat timeout, and
+        time when their heartbeats report WATCHDOG_TIMER_EXPIRED."""
+        bit = proto.WATCHDOG_TIMER_EXPIRED["0.5"]
+        for node, axis in zip(self.joints.node_ids, self._axes):
+            if axis.heartbeat.axis_error & bit:
+                self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors(firmware="0.5"))
+        for axis in self._axes:
+            axis.probe_since, axis.probe = axis.last_sent, []
+        deadline = max(a.last_sent for a in self._axes) + self._watchdog_bound + \
+            self._heartbeat_timeout
+        try:
+            while time.monotonic() < deadline and not all(
+                    any(error & bit for _, error in a.probe) for a in self._axes):
+                self._drain()
+                time.sleep(0.002)
+        finally:
+            for axis in self._axes:
+                axis.watchdog = wd.probed(axis.probe_since, axis.probe, bit,
+                                          self._watchdog_bound, 1.0 / self.control_rate)
+                axis.probe_since = None
 
     # -- bus ------------------------------------------------------------------------------
     def _drain(self) -> float:
@@ -298,6 +500,14 @@ class OdriveCanDriver(CanDriver):
                 axis.heartbeat = proto.Heartbeat.decode(bytes(msg.data), self.firmware)
                 axis.heartbeat_time = now
                 axis.heartbeats += 1
+                if axis.probe_since is not None and now > axis.probe_since:
+                    axis.probe.append((now, axis.heartbeat.axis_error))
+            elif cmd == Cmd.TX_SDO and self.firmware == "0.6":
+                reply = proto.SdoReply.decode(bytes(msg.data))
+                count = axis.sdo.get(reply.endpoint_id, (b"", 0))[1]
+                axis.sdo[reply.endpoint_id] = (reply.value, count + 1)
+            elif cmd == Cmd.GET_VERSION and self.firmware == "0.6" and len(msg.data):
+                axis.version = proto.Version.decode(bytes(msg.data))
             elif cmd == Cmd.GET_ENCODER_ESTIMATES:
                 est = proto.EncoderEstimates.decode(bytes(msg.data))
                 axis.position_rev, axis.velocity_rev_per_s = est.position_rev, est.velocity_rev_per_s
@@ -320,6 +530,7 @@ class OdriveCanDriver(CanDriver):
         except can.CanError as exc:
             raise DriverCommunicationError(f"send failed: {exc}", f"ODrive node {node}") from exc
         self.counters["frames_sent"] += 1
+        self._axes[self._index[node]].last_sent = time.monotonic()
 
     def _request_estimates(self) -> None:
         for node in self.joints.node_ids:

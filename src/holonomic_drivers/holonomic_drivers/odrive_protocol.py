@@ -18,6 +18,11 @@ Axis_Error bits     AxisError of 0.5.x:            ODrive.Error: 0x40 MISSING_IN
                     0x40 MOTOR_FAILED, 0x800       0x1000000 WATCHDOG_TIMER_EXPIRED, ...
                     WATCHDOG_TIMER_EXPIRED, ...
 Clear_Errors        no payload                     1 byte (Identify)
+endpoint access     none                           RxSdo / TxSdo by endpoint id
+                                                   (ids from the firmware's
+                                                   flat_endpoints.json), Get_Version
+watchdog fed by     any frame to the axis          Set_Input_* and Set_Axis_State (what
+                    (its can_simple.cpp)           ODrive's own examples say)
 =================== ============================== ===================================
 
 Only the messages this stack uses are here; see the ODrive documentation
@@ -45,9 +50,12 @@ def max_node_id(firmware: str) -> int:
 
 
 class Cmd(enum.IntEnum):
+    GET_VERSION = 0x00           # 0.6.x: axis -> host on request: hardware and firmware versions
     HEARTBEAT = 0x01             # axis -> host, cyclic
     ESTOP = 0x02
     GET_ERROR = 0x03             # axis -> host (RTR or cyclic): active_errors, disarm_reason
+    RX_SDO = 0x04                # 0.6.x: host -> axis, read / write one endpoint by id
+    TX_SDO = 0x05                # 0.6.x: axis -> host, the endpoint's value
     SET_AXIS_STATE = 0x07
     GET_ENCODER_ESTIMATES = 0x09  # axis -> host (cyclic or RTR): pos [rev], vel [rev/s]
     SET_CONTROLLER_MODE = 0x0B
@@ -107,6 +115,13 @@ WATCHDOG_TIMER_EXPIRED = {"0.5": 0x800, "0.6": 0x1000000}
 ESTOP_REQUESTED = {"0.5": 0x4000, "0.6": 0x2000000}
 
 
+#: the types of flat_endpoints.json -> struct format (those of ODrive's own
+#: client, odrive/codecs.py of the odrive package 0.6.11)
+ENDPOINT_TYPES = {"bool": "?", "uint8": "B", "int8": "b", "uint16": "H", "int16": "h",
+                  "uint32": "I", "int32": "i", "uint64": "Q", "int64": "q", "float": "f"}
+SDO_READ, SDO_WRITE = 0, 1
+
+
 def error_names(bits: int, firmware: str = "0.6") -> str:
     """``0x20`` -> ``'DRV_FAULT'`` (names of ``firmware``'s axis error bits);
     unknown bits in hex."""
@@ -153,6 +168,76 @@ def set_limits(vel_limit_rev_per_s: float, current_limit: float) -> bytes:
 def clear_errors(identify: bool = False, firmware: str = "0.6") -> bytes:
     """0.6.x: one byte, Identify (blink the LED); 0.5.x: no payload."""
     return b"" if firmware == "0.5" else struct.pack("<B", int(identify))
+
+
+def sdo_request(opcode: int, endpoint_id: int, value: bytes = b"") -> bytes:
+    """RxSdo payload: opcode (0 read, 1 write), endpoint id (uint16), a
+    reserved byte, then the value (little endian, at most 4 bytes here)."""
+    if len(value) > 4:
+        raise ValueError(f"endpoint value of {len(value)} bytes (at most 4 in one frame)")
+    return struct.pack("<BHB", int(opcode), int(endpoint_id), 0) + value
+
+
+def encode_value(kind: str, value) -> bytes:
+    """``value`` as an endpoint of type ``kind`` ("float", "bool", ...) sends it."""
+    return struct.pack("<" + ENDPOINT_TYPES[kind], value)
+
+
+def decode_value(kind: str, data: bytes):
+    """The value of an endpoint of type ``kind`` from the first bytes of ``data``."""
+    fmt = "<" + ENDPOINT_TYPES[kind]
+    if len(data) < struct.calcsize(fmt):
+        raise ValueError(f"{kind} endpoint value of {len(data)} bytes")
+    return struct.unpack_from(fmt, data)[0]
+
+
+@dataclass(frozen=True)
+class SdoReply:
+    """TxSdo: the endpoint id and the raw value bytes (decode with
+    :func:`decode_value` and the endpoint's type)."""
+
+    endpoint_id: int
+    value: bytes
+
+    def encode(self) -> bytes:
+        return struct.pack("<BHB", 0, self.endpoint_id, 0) + self.value
+
+    @classmethod
+    def decode(cls, data: bytes) -> "SdoReply":
+        if len(data) < 4:
+            raise ValueError(f"TxSdo of {len(data)} bytes (at least 4 expected)")
+        _, endpoint_id, _ = struct.unpack_from("<BHB", data)
+        return cls(endpoint_id, bytes(data[4:]))
+
+
+@dataclass(frozen=True)
+class Version:
+    """Get_Version (0.6.x): the board (hardware product line, version,
+    variant: 4.4.58 is an ODrive Pro, 5.2.0 an S1, 6.x.0 a Micro) and the
+    firmware (major.minor.revision; ``unreleased`` != 0 for a development
+    build)."""
+
+    protocol: int
+    hw: tuple[int, int, int]
+    fw: tuple[int, int, int]
+    unreleased: int = 0
+
+    @property
+    def hw_text(self) -> str:
+        return ".".join(map(str, self.hw))
+
+    @property
+    def fw_text(self) -> str:
+        return ".".join(map(str, self.fw))
+
+    def encode(self) -> bytes:
+        return bytes((self.protocol, *self.hw, *self.fw, self.unreleased))
+
+    @classmethod
+    def decode(cls, data: bytes) -> "Version":
+        if len(data) != 8:
+            raise ValueError(f"version of {len(data)} bytes (8 expected)")
+        return cls(data[0], tuple(data[1:4]), tuple(data[4:7]), data[7])
 
 
 # -- axis -> host ----------------------------------------------------------------------
