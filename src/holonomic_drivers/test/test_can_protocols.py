@@ -34,7 +34,7 @@ def test_odrive_frame_ids_pack_node_and_command():
 def test_odrive_ids_and_enumerations_are_the_firmwares():
     """Written from the ODrive CAN protocol documentation (firmware 0.6; the
     same values in the independent odrive-messages crate), not from our enums."""
-    ids = {"HEARTBEAT": 0x01, "ESTOP": 0x02, "GET_ERROR": 0x03, "SET_AXIS_STATE": 0x07,
+    ids = {"GET_VERSION": 0x00, "RX_SDO": 0x04, "TX_SDO": 0x05, "HEARTBEAT": 0x01, "ESTOP": 0x02, "GET_ERROR": 0x03, "SET_AXIS_STATE": 0x07,
            "GET_ENCODER_ESTIMATES": 0x09, "SET_CONTROLLER_MODE": 0x0B, "SET_INPUT_VEL": 0x0D,
            "SET_INPUT_TORQUE": 0x0E, "SET_LIMITS": 0x0F, "REBOOT": 0x16, "CLEAR_ERRORS": 0x18}
     assert {c.name: c.value for c in proto.Cmd} == ids
@@ -125,7 +125,11 @@ def test_odrive_driver_sends_the_scripted_frames():
         for n in (0, 1, 2):
             expected += [(n << 5 | 0x18, H("00")), (n << 5 | 0x0B, H("02000000 01000000")),
                          (n << 5 | 0x0D, H("00000000 00000000")), (n << 5 | 0x07, H("08000000"))]
-        assert _frames_to(rig.sniff()[mark:], {0, 1, 2}) == expected
+        armed = _frames_to(rig.sniff()[mark:], {0, 1, 2})
+        assert armed[:12] == expected
+        # until the heartbeats confirm closed loop: zero velocity to each axis
+        # every 20 ms (it feeds the axis watchdogs)
+        assert set(armed[12:]) <= {(n << 5 | 0x0D, bytes(8)) for n in (0, 1, 2)}
 
         mark = len(rig.sniff())
         # joint rad/s: left 2 pi -> 1 rev/s; right -pi, direction -1 -> +0.5 rev/s;

@@ -109,10 +109,14 @@ def test_every_frame_the_driver_sends_decodes_with_odrives_dbc(firmware):
             ("Set_Axis_State", {"Axis_Requested_State": "IDLE"})]
         # 0.6.10: Clear_Errors carries Identify (0: do not blink); 0.5.6: no payload
         clear = {"Identify": 0} if firmware == "0.6" else {}
-        assert [(m, v) for n, m, v, _ in sent("arm") if n == node] == [
+        arm = [(m, v) for n, m, v, _ in sent("arm") if n == node]
+        assert arm[:4] == [
             ("Clear_Errors", clear), ("Set_Controller_Mode", velocity_mode),
             ("Set_Input_Vel", zero_velocity),
             ("Set_Axis_State", {"Axis_Requested_State": "CLOSED_LOOP_CONTROL"})]
+        # then, until the heartbeats confirm closed loop, zero velocity every
+        # ARM_FEED_PERIOD: it feeds the axis watchdog while the driver waits
+        assert set(map(str, arm[4:])) <= {str(("Set_Input_Vel", zero_velocity))}
         [(_, message, values, units)] = [s for s in sent("velocity") if s[0] == node]
         assert message == "Set_Input_Vel"
         assert values["Input_Vel"] == pytest.approx(MOTOR_REV_PER_S[node], rel=1e-6)
