@@ -266,6 +266,11 @@ class EmulatedOdriveAxis(EmulatedDevice):
         self._next_encoder = -math.inf
 
     @property
+    def last_feed(self) -> float:
+        """When the axis watchdog was last fed [s, wall clock]."""
+        return self._last_input
+
+    @property
     def axis_error(self) -> int:
         return self.condition | self.disarm_reason
 
