@@ -16,6 +16,7 @@ and encoded with cantools.
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 import struct
 import threading
@@ -343,3 +344,172 @@ def test_node_ids_are_limited_to_what_each_firmware_allows():
     for firmware in ("0.5", "0.6"):
         with pytest.raises(ConfigError, match=r"odrive_can.joints.turret_joint.node_id"):
             _driver_with_node(64, firmware)
+
+
+# -- the axis watchdog over the DBC's Get_Version, RxSdo and TxSdo ----------------------------
+class DbcEndpointAxes(DbcAxes):
+    """DbcAxes that also answer, in frames encoded from the DBC, Get_Version
+    (board 4.4.58, firmware 0.6.11) and RxSdo reads and writes of the
+    endpoints in ``values`` ((node, endpoint id) -> the DBC's 32-bit Value);
+    writes are confirmed (0.6.11). Every RxSdo is recorded as the DBC
+    decodes it. Firmware 0.5: heartbeats report WATCHDOG_TIMER_EXPIRED once
+    no frame has come to the node for ``watchdog_timeout`` [s] (0.5's
+    can_simple.cpp feeds the watchdog on every frame; main.cpp checks it in
+    every state)."""
+
+    def __init__(self, db, channel, firmware, values=None, watchdog_timeout=0.0):
+        self.values = dict(values or {})
+        self.requests: list[tuple[int, dict]] = []
+        self.watchdog_timeout = watchdog_timeout
+        self.fed = {n: time.monotonic() for n in range(3)}
+        super().__init__(db, channel, firmware)
+
+    def _answer(self, msg):
+        node, cmd = proto.split_id(msg.arbitration_id)
+        if node not in range(3):
+            return
+        self.fed[node] = time.monotonic()
+        if self.firmware != "0.6":
+            return
+        if cmd == proto.Cmd.GET_VERSION and not msg.data:
+            self.bus.send(self._encode(f"Axis{node}_Get_Version", {
+                "Protocol_Version": 2, "Hw_Version_Major": 4, "Hw_Version_Minor": 4,
+                "Hw_Version_Variant": 58, "Fw_Version_Major": 0, "Fw_Version_Minor": 6,
+                "Fw_Version_Revision": 11, "Fw_Version_Unreleased": 0}))
+        elif cmd == proto.Cmd.RX_SDO:
+            # a write of a bool is 5 bytes (as ODrive's can_param_access example
+            # packs it): the DBC's Value is then the bytes present, zero-padded
+            request = self.db.get_message_by_name(f"Axis{node}_RxSdo").decode(
+                bytes(msg.data).ljust(8, b"\0"), decode_choices=False)
+            self.requests.append((node, request))
+            key = (node, request["Endpoint_ID"])
+            if request["Opcode"] == 1:
+                self.values[key] = request["Value"]
+            self.bus.send(self._encode(f"Axis{node}_TxSdo", {
+                "Endpoint_ID": request["Endpoint_ID"], "Value": self.values[key]}))
+
+    def _run(self):
+        while not self._stop.is_set():
+            while (msg := self.bus.recv(timeout=0.0)) is not None:
+                with self.lock:
+                    self._answer(msg)
+            if self.firmware == "0.5" and self.watchdog_timeout > 0:
+                with self.lock:
+                    for n in range(3):
+                        if time.monotonic() - self.fed[n] > self.watchdog_timeout:
+                            self.heartbeat[n]["Axis_Error"] = 0x800
+            with self.lock:
+                frames = [self._encode(f"Axis{n}_Heartbeat", self.heartbeat[n])
+                          for n in range(3)]
+                frames += [self._encode(f"Axis{n}_Get_Encoder_Estimates", self.estimates[n])
+                           for n in range(3)]
+            for msg in frames:
+                self.bus.send(msg)
+            self._stop.wait(0.005)
+
+
+def _f32(value: float) -> int:
+    """The DBC's 32-bit Value carrying a float32 endpoint."""
+    return struct.unpack("<I", struct.pack("<f", value))[0]
+
+
+def test_watchdog_endpoints_are_read_and_written_in_the_dbcs_rxsdo_and_txsdo(tmp_path):
+    db = load_dbc("0.6")
+    rx = db.get_message_by_name("Axis0_RxSdo")
+    # the DBC's opcodes and field layout are the protocol module's
+    assert {int(k): str(v) for k, v in rx.get_signal_by_name("Opcode").choices.items()} == \
+        {proto.SDO_READ: "READ", proto.SDO_WRITE: "WRITE"}
+    assert rx.decode(proto.sdo_request(proto.SDO_WRITE, 0x1234, struct.pack("<f", 1.0)),
+                     decode_choices=False) == {"Opcode": 1, "Endpoint_ID": 0x1234,
+                                               "Reserved": 0, "Value": 0x3F800000}
+    reply = db.get_message_by_name("Axis0_TxSdo").encode(
+        {"Reserved0": 0, "Endpoint_ID": 0x1234, "Reserved1": 0, "Value": 0x3F800000})
+    assert proto.SdoReply.decode(reply) == proto.SdoReply(0x1234, struct.pack("<f", 1.0))
+    version = db.get_message_by_name("Axis0_Get_Version").encode({
+        "Protocol_Version": 2, "Hw_Version_Major": 4, "Hw_Version_Minor": 4,
+        "Hw_Version_Variant": 58, "Fw_Version_Major": 0, "Fw_Version_Minor": 6,
+        "Fw_Version_Revision": 11, "Fw_Version_Unreleased": 1})
+    assert proto.Version.decode(version) == proto.Version(2, (4, 4, 58), (0, 6, 11), 1)
+    ids = {"axis0.config.enable_watchdog": 411, "axis0.config.watchdog_timeout": 412}
+    path = tmp_path / "flat_endpoints.json"
+    path.write_text(json.dumps({"fw_version": "0.6.11", "hw_version": "4.4.58", "endpoints": {
+        name: {"id": i, "type": "bool" if "enable" in name else "float", "access": "rw"}
+        for name, i in ids.items()}}))
+    channel = unique_channel("dbc")
+    config = load_config("hamr", {"driver": "odrive_can", "odrive_can.interface": "virtual",
+                                  "odrive_can.channel": channel, "odrive_can.endpoints": str(path),
+                                  "odrive_can.set_watchdog": 0.15,
+                                  "odrive_can.watchdog_check": "refuse"})
+    # every drive: watchdog off, 0 s
+    axes = DbcEndpointAxes(db, channel, "0.6",
+                           {(n, i): 0 for n in range(3) for i in ids.values()})
+    driver = config.driver_class(config.model, config.values, config.controller.control_rate)
+    try:
+        driver.configure()
+        for node in range(3):
+            sent = [(r["Opcode"], r["Endpoint_ID"], r["Value"]) for n, r in axes.requests
+                    if n == node]
+            # the timeout first, read back; then enable, read back; then both read
+            assert sent == [(1, 412, _f32(0.15)), (0, 412, 0), (1, 411, 1), (0, 411, 0),
+                            (0, 411, 0), (0, 412, 0)]
+            assert axes.values[(node, 411)] == 1 and axes.values[(node, 412)] == _f32(0.15)
+        assert driver.status()["turret_joint"].endswith(
+            "watchdog on, 0.15 s (read over CAN, firmware 0.6.11)")
+        _arm(driver, axes, {})
+        assert driver.armed
+    finally:
+        driver.close()
+        axes.close()
+
+
+def test_a_0_6_drive_whose_dbc_value_says_off_is_refused(tmp_path):
+    path = tmp_path / "flat_endpoints.json"
+    path.write_text(json.dumps({"fw_version": "0.6.11", "hw_version": "4.4.58", "endpoints": {
+        "axis0.config.enable_watchdog": {"id": 7, "type": "bool"},
+        "axis0.config.watchdog_timeout": {"id": 8, "type": "float"}}}))
+    channel = unique_channel("dbc")
+    config = load_config("hamr", {"driver": "odrive_can", "odrive_can.interface": "virtual",
+                                  "odrive_can.channel": channel, "odrive_can.endpoints": str(path),
+                                  "odrive_can.watchdog_check": "refuse"})
+    # nodes 0 and 2 on with 0.2 s; node 1 off (its timeout says 0.2 s all the same)
+    values = {(n, 7): int(n != 1) for n in range(3)}
+    values.update({(n, 8): _f32(0.2) for n in range(3)})
+    axes = DbcEndpointAxes(load_dbc("0.6"), channel, "0.6", values)
+    driver = config.driver_class(config.model, config.values, config.controller.control_rate)
+    try:
+        driver.configure()
+        assert driver.status()["left_wheel_joint"].endswith("watchdog on, 0.2 s (read over CAN, "
+                                                            "firmware 0.6.11)")
+        with pytest.raises(DriverFault, match=r"right_wheel_joint \(ODrive node 1\): axis "
+                                              r"watchdog OFF \(enable_watchdog false, timeout "
+                                              r"0.2 s"):
+            driver.activate()
+    finally:
+        driver.close()
+        axes.close()
+
+
+@pytest.mark.parametrize("timeout, ok", [(0.15, True), (0.0, False)])
+def test_a_0_5_drive_is_probed_through_the_dbcs_heartbeat(timeout, ok):
+    """0.5.6's DBC names bit 0x800 WATCHDOG_TIMER_EXPIRED: the probe reads it
+    from heartbeats encoded with that file, while the axes stay IDLE."""
+    channel = unique_channel("dbc")
+    config = load_config("hamr", {"driver": "odrive_can", "odrive_can.interface": "virtual",
+                                  "odrive_can.channel": channel, "odrive_can.firmware": "0.5",
+                                  "odrive_can.watchdog_check": "refuse"})
+    db = load_dbc("0.5")
+    assert str(db.get_message_by_name("Axis0_Heartbeat").get_signal_by_name(
+        "Axis_Error").choices[0x800]) == "WATCHDOG_TIMER_EXPIRED"
+    axes = DbcEndpointAxes(db, channel, "0.5", watchdog_timeout=timeout)
+    driver = config.driver_class(config.model, config.values, config.controller.control_rate)
+    try:
+        driver.configure()
+        text = driver.status()["left_wheel_joint"]
+        assert "error 0x800 (WATCHDOG_TIMER_EXPIRED)" in text if ok else "error 0x0" in text
+        assert ("watchdog expired" in text) == ok
+        if not ok:
+            with pytest.raises(DriverFault, match="OFF or longer than max_watchdog_timeout"):
+                driver.activate()
+    finally:
+        driver.close()
+        axes.close()
