@@ -173,8 +173,9 @@ class OdriveCanDriver(CanDriver):
                       default=0.0, minimum=0.0, maximum=10.0),
             ParamSpec(f"{PREFIX}.endpoints", "string",
                       "Firmware 0.6: the flat_endpoints.json of the drives' firmware and "
-                      "board (ODrive publishes one per release and board), to read the "
-                      "axis watchdog settings over CAN; empty = they cannot be read.",
+                      "board (ODrive publishes one per release and board; absolute path, or "
+                      "relative to the working directory), to read the axis watchdog "
+                      "settings over CAN; empty = they cannot be read.",
                       default=""),
             ParamSpec(f"{PREFIX}.sdo_timeout", "double",
                       "Time a drive has to answer Get_Version or an endpoint read [s].",
