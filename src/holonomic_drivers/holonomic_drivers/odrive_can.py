@@ -415,27 +415,32 @@ class OdriveCanDriver(CanDriver):
             raise DriverFault(f"{endpoint.path}: {exc}", self.devices[i]) from None
 
     def _write_endpoint(self, i: int, endpoint: odrive_endpoints.Endpoint, value) -> None:
-        """Write, then read back (firmware before 0.6.11 does not confirm a
-        write; a later one does, which the read-back waits out)."""
+        """Write, then read back. Firmware before 0.6.11 does not confirm a
+        write; a later one does (ODrive's can_param_access example): the
+        confirmation is waited out, so that it is not taken for the answer to
+        the read, but not required -- the read-back is the check."""
         axis = self._axes[i]
         before = axis.sdo.get(endpoint.id, (b"", 0))[1]
         self._send(self.joints.node_ids[i], Cmd.RX_SDO, proto.sdo_request(
             proto.SDO_WRITE, endpoint.id, proto.encode_value(endpoint.type, value)))
         if axis.version.fw >= (0, 6, 11):
             self._await(lambda: axis.sdo.get(endpoint.id, (b"", 0))[1] > before,
-                        self.devices[i], f"the write of {endpoint.path}")
+                        self.devices[i], f"the write of {endpoint.path}", required=False)
         back = self._read_endpoint(i, endpoint)
         if back != proto.decode_value(endpoint.type, proto.encode_value(endpoint.type, value)):
             raise DriverFault(f"wrote {value} to {endpoint.path}, reads back {back}",
                               self.devices[i])
 
-    def _await(self, done, device: str, what: str) -> None:
+    def _await(self, done, device: str, what: str, required: bool = True) -> None:
+        """Drain the bus until ``done()`` or ``sdo_timeout``; then raise if ``required``."""
         deadline = time.monotonic() + self._sdo_timeout
         while True:
             self._drain()
             if done():
                 return
             if time.monotonic() > deadline:
+                if not required:
+                    return
                 raise DriverCommunicationError(
                     f"no answer to {what} within {self._sdo_timeout:g} s (firmware 0.6 "
                     f"with {PREFIX}.endpoints of this firmware and board?)", device)
