@@ -165,8 +165,12 @@ class DbcAxes:
         return can.Message(arbitration_id=message.frame_id, data=message.encode(full),
                            is_extended_id=False)
 
+    def _listen(self):
+        """Handle what reached the axes (nothing here: they only send)."""
+
     def _run(self):
         while not self._stop.is_set():
+            self._listen()
             with self.lock:
                 frames = [self._encode(f"Axis{n}_Heartbeat", self.heartbeat[n])
                           for n in range(3)]
@@ -388,24 +392,15 @@ class DbcEndpointAxes(DbcAxes):
             self.bus.send(self._encode(f"Axis{node}_TxSdo", {
                 "Endpoint_ID": request["Endpoint_ID"], "Value": self.values[key]}))
 
-    def _run(self):
-        while not self._stop.is_set():
-            while (msg := self.bus.recv(timeout=0.0)) is not None:
-                with self.lock:
-                    self._answer(msg)
-            if self.firmware == "0.5" and self.watchdog_timeout > 0:
-                with self.lock:
-                    for n in range(3):
-                        if time.monotonic() - self.fed[n] > self.watchdog_timeout:
-                            self.heartbeat[n]["Axis_Error"] = 0x800
+    def _listen(self):
+        while (msg := self.bus.recv(timeout=0.0)) is not None:
             with self.lock:
-                frames = [self._encode(f"Axis{n}_Heartbeat", self.heartbeat[n])
-                          for n in range(3)]
-                frames += [self._encode(f"Axis{n}_Get_Encoder_Estimates", self.estimates[n])
-                           for n in range(3)]
-            for msg in frames:
-                self.bus.send(msg)
-            self._stop.wait(0.005)
+                self._answer(msg)
+        if self.firmware == "0.5" and self.watchdog_timeout > 0:
+            with self.lock:
+                for n in range(3):
+                    if time.monotonic() - self.fed[n] > self.watchdog_timeout:
+                        self.heartbeat[n]["Axis_Error"] = 0x800
 
 
 def _f32(value: float) -> int:
