@@ -16,6 +16,9 @@ from dataclasses import dataclass
 POLICIES = ("warn", "refuse")
 #: a watchdog shorter than this many control periods trips on a late cycle
 MIN_PERIODS = 3
+#: the drive stores float32: 0.3 s reads back as 0.30000001 s (relative
+#: rounding <= 6e-8), which is not longer than a bound of 0.3 s
+FLOAT32_SLACK = 1e-6
 
 
 @dataclass(frozen=True)
@@ -34,7 +37,7 @@ def assess(enabled: bool, timeout: float, bound: float, control_period: float,
     if not timeout > 0.0:
         return Verdict(False, f"on but with timeout {timeout:g} s, which never expires "
                               f"({source})")
-    if timeout > bound:
+    if timeout > bound * (1.0 + FLOAT32_SLACK):
         return Verdict(False, f"{timeout:.3g} s, longer than max_watchdog_timeout "
                               f"{bound:g} s ({source})")
     if timeout < MIN_PERIODS * control_period:

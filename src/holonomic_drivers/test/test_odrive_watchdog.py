@@ -20,6 +20,7 @@ import json
 import os
 import select
 import signal
+import struct
 import subprocess
 import sys
 import tempfile
@@ -68,6 +69,10 @@ def test_verdicts_of_settings_read_from_the_drive():
     # bound 0.3 s, control period 5 ms (3 periods = 15 ms)
     assert wd.assess(True, 0.2, 0.3, 0.005, "x") == wd.Verdict(True, "on, 0.2 s (x)")
     assert wd.assess(True, 0.3, 0.3, 0.005, "x").ok              # the bound itself is accepted
+    # ... also as the drive stores it: float32(0.3) = 0.30000001192092896
+    f32 = struct.unpack("<f", struct.pack("<f", 0.3))[0]
+    assert f32 > 0.3 and wd.assess(True, f32, 0.3, 0.005, "x").ok
+    assert not wd.assess(True, 0.3001, 0.3, 0.005, "x").ok
     off = wd.assess(False, 0.2, 0.3, 0.005, "x")
     assert not off.ok and off.text.startswith("OFF")
     assert not wd.assess(True, 0.0, 0.3, 0.005, "x").ok          # 0 never expires
