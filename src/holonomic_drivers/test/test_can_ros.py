@@ -5,12 +5,17 @@ kinematics, odometry comes from the encoders, a drive fault is an ERROR in
 diagnostics naming the drive, ~/enable is refused until it clears, and
 shutting the node down stops every drive."""
 
+import contextlib
+import json
 import math
+import os
 import shutil
+import signal
 import struct
 import tempfile
 import threading
 import time
+from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
@@ -21,7 +26,9 @@ from rclpy.parameter import Parameter
 from holonomic_bringup.base_controller_node import BaseControllerNode
 from holonomic_core.model import load_model
 from holonomic_core.se2 import arc_between
+from holonomic_drivers import odrive_endpoints
 from holonomic_drivers import odrive_protocol as proto
+from holonomic_drivers.odrive_protocol import AxisState
 from holonomic_testing.drive_host import DriveHost
 from holonomic_testing.ipc_can import IpcBus
 from holonomic_testing.ros_probe import Probe, wait_until
@@ -29,11 +36,15 @@ from holonomic_testing.ros_probe import Probe, wait_until
 NS = "canbot"
 
 
-@pytest.fixture
-def can_robot(ros):
+@contextlib.contextmanager
+def odrive_robot(ros, drive_kwargs=None, params=()):
+    """The node (its loop in its own process) on three emulated ODrives
+    (``drive_kwargs`` for each ``EmulatedOdriveAxis``), with ``params``
+    (more ``Parameter``s); yields (node, probe, devices, sniffer)."""
     folder = tempfile.mkdtemp(prefix="holonomic-can-")
     bus = f"{folder}/bus"
-    host = DriveHost([("odrive", n, {}) for n in (0, 1, 2)], bus)      # config/hamr.yaml
+    host = DriveHost([("odrive", n, dict(drive_kwargs or {})) for n in (0, 1, 2)],
+                     bus)      # config/hamr.yaml
     devices = host.devices
     sniffer = IpcBus(channel=bus)
     node = BaseControllerNode(namespace=NS, parameter_overrides=[
@@ -45,7 +56,7 @@ def can_robot(ros):
         # wire at 0.72 x the command, the base braking and re-accelerating,
         # with two busy loops at load 12-22); the timeout itself is tested
         # elsewhere (test_hamr_ros, test_foxglove)
-        Parameter("cmd_timeout", value=3.0)])
+        Parameter("cmd_timeout", value=3.0), *params])
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     stop = threading.Event()
@@ -70,6 +81,12 @@ def can_robot(ros):
         sniffer.shutdown()
         host.close()
         shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture
+def can_robot(ros):
+    with odrive_robot(ros) as robot:
+        yield robot
 
 
 def _sniff(sniffer, frames) -> list:
@@ -159,3 +176,59 @@ def test_cmd_vel_drives_the_odrives_and_a_fault_is_reported_by_name(can_robot):
             and proto.split_id(m.arbitration_id)[1] == proto.Cmd.SET_AXIS_STATE
             and m.data[0] == proto.AxisState.IDLE}
     assert idle == {0, 1, 2}
+
+
+def _loop_pid() -> int:
+    """The node's loop process: the child of this test process running loop_host."""
+    for task in Path(f"/proc/{os.getpid()}/task").iterdir():
+        for pid in (task / "children").read_text().split():
+            if b"holonomic_bringup.loop_host" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                return int(pid)
+    raise AssertionError("no loop process")
+
+
+def _driver_status(probe):
+    if probe.diagnostics is None:
+        return None
+    return next((s for s in probe.diagnostics.status if s.name.endswith("driver")), None)
+
+
+def test_killing_the_loop_process_stops_every_odrive_by_its_axis_watchdog(ros, tmp_path):
+    """Issue 24's "a crash of the loop stops the motors" on ODrives: the
+    driver enables each axis watchdog at configure (0.2 s, over RxSdo with
+    the drives' endpoints file) and will not arm otherwise; the loop process
+    is killed with SIGKILL while the base drives: nothing is left to command
+    the drives, and each goes idle with WATCHDOG_TIMER_EXPIRED, 0.2 s after
+    the last frame it got."""
+    path = tmp_path / "flat_endpoints.json"
+    path.write_text(json.dumps({"fw_version": "0.6.11", "hw_version": "4.4.58", "endpoints": {
+        "axis0.config.enable_watchdog": {"id": 300, "type": "bool", "access": "rw"},
+        "axis0.config.watchdog_timeout": {"id": 301, "type": "float", "access": "rw"}}}))
+    table = odrive_endpoints.load(str(path))
+    with odrive_robot(ros, {"endpoints": table}, [
+            Parameter("odrive_can.endpoints", value=str(path)),
+            Parameter("odrive_can.set_watchdog", value=0.2),
+            Parameter("odrive_can.watchdog_check", value="refuse")]) as (_, probe, devices, _s):
+        wait_until(lambda: _driver_status(probe) is not None, 10.0, "driver diagnostics")
+        values = {kv.key: kv.value for kv in _driver_status(probe).values}
+        for joint in ("left_wheel_joint", "right_wheel_joint", "turret_joint"):
+            assert "watchdog on, 0.2 s (read over CAN, firmware 0.6.11)" in values[joint]
+        assert probe.enable(True).success
+        probe.drive((0.3, 0.0, 0.0), 0.5)
+        assert all(abs(d.velocity_rev_per_s) > 0.1 for d in devices[:2])   # the wheels turn
+        killed = time.time()
+        os.kill(_loop_pid(), signal.SIGKILL)
+        wait_until(lambda: all(d.axis_state == AxisState.IDLE for d in devices), 5.0,
+                   "every drive idle")
+        for d in devices:
+            assert d.axis_error == proto.WATCHDOG_TIMER_EXPIRED["0.6"]
+            fed, detected = d.watchdog_expired
+            assert fed <= killed + 0.01
+            # 0.2 s after the last frame, not before; the drives' 1 ms tick
+            # after it (test_odrive_watchdog measures 0.03-1.1 ms; 50 ms for a
+            # drives' process without real-time priority on a loaded machine)
+            assert 0.2 <= detected - fed <= 0.25
+        wait_until(lambda: all(d.velocity_rev_per_s == 0.0 for d in devices), 5.0,
+                   "every motor stopped")
+        wait_until(lambda: _driver_status(probe) is not None and "killed by SIGKILL" in
+                   _driver_status(probe).message, 10.0, "the node reporting the loop's end")
