@@ -27,6 +27,7 @@ import tempfile
 import textwrap
 import time
 
+import can
 import pytest
 
 from holonomic_core.config import load_config
@@ -392,3 +393,42 @@ def test_killing_the_controlling_process_stops_every_axis_by_its_watchdog(endpoi
             controller.wait()
         controller.stdout.close()
         host.close()
+
+
+@pytest.mark.parametrize("firmware", ["0.5", "0.6"])
+def test_emulated_watchdog_feeding_and_idle_expiry_follow_each_firmware(firmware):
+    """0.5 (its can_simple.cpp, main.cpp): any frame to the axis -- here a
+    remote request for the encoder estimates -- feeds the watchdog, and an
+    idle axis latches WATCHDOG_TIMER_EXPIRED. 0.6 as emulated: a remote
+    request does not feed, an idle axis latches nothing."""
+    channel = unique_channel("wdfeed")
+    axis = EmulatedOdriveAxis(0, channel, firmware=firmware, watchdog_timeout=0.2)
+    host = can.Bus(interface="virtual", channel=channel)
+    try:
+        bit = proto.WATCHDOG_TIMER_EXPIRED[firmware]
+        t0 = time.time()
+        axis.poll(t0)
+        axis.tick(t0)
+        if firmware == "0.5":
+            # never fed since "boot" (0 s): latched at once while idle; cleared by Clear_Errors
+            assert axis.axis_error == bit and axis.axis_state == AxisState.IDLE
+        else:
+            assert axis.axis_error == 0
+        host.send(can.Message(arbitration_id=proto.frame_id(0, proto.Cmd.CLEAR_ERRORS),
+                              data=proto.clear_errors(firmware=firmware), is_extended_id=False))
+        time.sleep(0.01)
+        axis.poll(time.time())
+        assert axis.axis_error == 0
+        cleared = axis.last_feed
+        host.send(can.Message(arbitration_id=proto.frame_id(0, proto.Cmd.GET_ENCODER_ESTIMATES),
+                              is_remote_frame=True, dlc=8, is_extended_id=False))
+        time.sleep(0.01)
+        axis.poll(time.time())
+        fed = axis.last_feed
+        assert (fed > cleared) == (firmware == "0.5")
+        axis.tick(time.time() + 0.2 + 1e-3)      # more than 0.2 s after any feed
+        assert axis.axis_error == (bit if firmware == "0.5" else 0)
+        assert axis.axis_state == AxisState.IDLE
+    finally:
+        host.shutdown()
+        axis.close()
