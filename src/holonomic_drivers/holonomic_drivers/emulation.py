@@ -206,9 +206,9 @@ class EmulatedOdriveAxis(EmulatedDevice):
       frame, main.cpp checks every axis in every state): any frame to the
       axis feeds it; when it expires, WATCHDOG_TIMER_EXPIRED is latched even
       in IDLE;
-    * 0.6 (closed source; ODrive's CAN examples): Set_Input_Vel,
-      Set_Input_Torque and Set_Axis_State feed it; it disarms an axis in
-      closed-loop control.
+    * 0.6 (closed source): Set_Input_Vel and Set_Axis_State feed it
+      (ODrive's can_watchdog example), here Set_Input_Torque too; it
+      disarms an axis in closed-loop control.
 
     Firmware 0.6 also answers Get_Version (``version``) and, given
     ``endpoints`` (an :class:`~holonomic_drivers.odrive_endpoints.EndpointFile`),

@@ -21,8 +21,8 @@ Clear_Errors        no payload                     1 byte (Identify)
 endpoint access     none                           RxSdo / TxSdo by endpoint id
                                                    (ids from the firmware's
                                                    flat_endpoints.json), Get_Version
-watchdog fed by     any frame to the axis          Set_Input_* and Set_Axis_State (what
-                    (its can_simple.cpp)           ODrive's own examples say)
+watchdog fed by     any frame to the axis          Set_Input_Vel, Set_Axis_State (ODrive's
+                    (its can_simple.cpp)           can_watchdog example)
 =================== ============================== ===================================
 
 Only the messages this stack uses are here; see the ODrive documentation
