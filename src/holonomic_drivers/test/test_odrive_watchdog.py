@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import os
 import select
+import shutil
 import signal
 import struct
 import subprocess
@@ -249,22 +250,18 @@ def test_0_6_set_watchdog_writes_the_drive_and_reads_it_back(rig_factory, endpoi
 
 
 @pytest.mark.parametrize("fw", [(0, 6, 10), (0, 6, 11)])
-def test_0_6_writes_work_with_and_without_the_write_confirmation(rig_factory, fw):
+def test_0_6_writes_work_with_and_without_the_write_confirmation(rig_factory, tmp_path, fw):
     """0.6.11 confirms a write with a TxSdo, earlier 0.6 does not (ODrive's
     can_param_access example): the driver reads back either way."""
-    text = endpoints_json(fw=".".join(map(str, fw)))
-    with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
-        f.write(text)
-    try:
-        version = proto.Version(2, (4, 4, 58), fw)
-        rig = rig_factory("0.6", {"odrive_can.endpoints": f.name,
-                                  "odrive_can.set_watchdog": 0.25},
-                          endpoints=odrive_endpoints.parse(text, f.name), version=version)
-        rig.driver.configure()
-        assert rig.driver.status()["left_wheel_joint"].endswith(
-            f"watchdog on, 0.25 s (read over CAN, firmware {'.'.join(map(str, fw))})")
-    finally:
-        os.unlink(f.name)
+    path = tmp_path / "flat_endpoints.json"
+    path.write_text(endpoints_json(fw=".".join(map(str, fw))))
+    rig = rig_factory("0.6", {"odrive_can.endpoints": str(path),
+                              "odrive_can.set_watchdog": 0.25},
+                      endpoints=odrive_endpoints.load(str(path)),
+                      version=proto.Version(2, (4, 4, 58), fw))
+    rig.driver.configure()
+    assert rig.driver.status()["left_wheel_joint"].endswith(
+        f"watchdog on, 0.25 s (read over CAN, firmware {'.'.join(map(str, fw))})")
 
 
 def test_0_6_endpoints_of_another_board_fail_configure_naming_both(rig_factory, endpoints_file):
@@ -393,6 +390,7 @@ def test_killing_the_controlling_process_stops_every_axis_by_its_watchdog(endpoi
             controller.wait()
         controller.stdout.close()
         host.close()
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.mark.parametrize("firmware", ["0.5", "0.6"])
