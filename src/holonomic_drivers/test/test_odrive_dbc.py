@@ -321,6 +321,9 @@ def test_frame_ids_are_the_dbc_files(firmware):
                 "Set_Input_Vel": proto.Cmd.SET_INPUT_VEL,
                 "Set_Input_Torque": proto.Cmd.SET_INPUT_TORQUE,
                 "Clear_Errors": proto.Cmd.CLEAR_ERRORS}
+    if firmware == "0.6":          # 0.6's endpoint access and version query
+        commands.update({"Get_Version": proto.Cmd.GET_VERSION, "RxSdo": proto.Cmd.RX_SDO,
+                         "TxSdo": proto.Cmd.TX_SDO})
     for node in range(8):
         for name, cmd in commands.items():
             assert db.get_message_by_name(f"Axis{node}_{name}").frame_id == \
