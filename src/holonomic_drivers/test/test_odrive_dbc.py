@@ -31,6 +31,7 @@ from holonomic_core.config import load_config
 from holonomic_core.driver import DriverFault
 from holonomic_core.schema import ConfigError
 from holonomic_drivers import odrive_protocol as proto
+from holonomic_drivers.emulation import EmulatedOdriveAxis
 from holonomic_testing.can_rig import CanRig, unique_channel
 from holonomic_testing.ros_probe import wait_until
 
@@ -428,6 +429,21 @@ def test_watchdog_endpoints_are_read_and_written_in_the_dbcs_rxsdo_and_txsdo(tmp
         "Hw_Version_Variant": 58, "Fw_Version_Major": 0, "Fw_Version_Minor": 6,
         "Fw_Version_Revision": 11, "Fw_Version_Unreleased": 1})
     assert proto.Version.decode(version) == proto.Version(2, (4, 4, 58), (0, 6, 11), 1)
+    # what the file's comments say, and the emulated axis does: protocol
+    # version 2; a heartbeat's Axis_Error is active_errors | disarm_reason (an
+    # axis the watchdog disarmed shows the bit); in 0.6.10 a TxSdo answers a
+    # read only (ODrive's can_param_access example: 0.6.11 confirms writes too)
+    assert db.get_message_by_name("Axis0_Get_Version").get_signal_by_name(
+        "Protocol_Version").comment == "Always reported as 2"
+    emulated = EmulatedOdriveAxis(0, unique_channel("dbcversion"))
+    try:
+        assert emulated.version.protocol == 2
+    finally:
+        emulated.close()
+    axis_error = db.get_message_by_name("Axis0_Heartbeat").get_signal_by_name("Axis_Error")
+    assert "active_errors" in axis_error.comment and "disarm_reason" in axis_error.comment
+    assert "in response to an RxSdo with Opcode=READ" in \
+        db.get_message_by_name("Axis0_TxSdo").comment
     ids = {"axis0.config.enable_watchdog": 411, "axis0.config.watchdog_timeout": 412}
     path = tmp_path / "flat_endpoints.json"
     path.write_text(json.dumps({"fw_version": "0.6.11", "hw_version": "4.4.58", "endpoints": {
