@@ -30,7 +30,11 @@ hangs) is checked at configure, per axis (:mod:`holonomic_drivers.odrive_watchdo
 * firmware 0.5 (no endpoint access): probed with the motors idle -- 0.5 feeds
   an axis's watchdog with any frame addressed to it and raises
   WATCHDOG_TIMER_EXPIRED even in IDLE, so the driver stays silent towards the
-  axes and times the bit's appearance in their heartbeats.
+  axes and times the bit's appearance in their heartbeats;
+* any firmware with ``odrive_can.watchdog_probe``: at the first arming, every
+  axis is armed at zero velocity and left alone until its watchdog disarms it
+  (the heartbeat reports WATCHDOG_TIMER_EXPIRED); that verdict replaces
+  configure's.
 
 An axis whose watchdog is off, unknown, longer than
 ``odrive_can.max_watchdog_timeout`` or shorter than three control periods is
@@ -82,9 +86,9 @@ class _Axis:
     version: proto.Version | None = None
     #: endpoint id -> (raw value, how many replies so far)
     sdo: dict[int, tuple[bytes, int]] = field(default_factory=dict)
-    #: when set: (stamp, axis error) of every heartbeat stamped after it
+    #: when set: (stamp, axis error, axis state) of every heartbeat stamped after it
     probe_since: float | None = None
-    probe: list[tuple[float, int]] | None = None
+    probe: list[tuple[float, int, int]] | None = None
     #: the last frame sent to the axis [s, driver clock] (it feeds 0.5's watchdog)
     last_sent: float = -math.inf
     watchdog: wd.Verdict | None = None
@@ -119,9 +123,9 @@ class OdriveCanDriver(CanDriver):
         self._watchdog_bound = float(params[f"{PREFIX}.max_watchdog_timeout"])
         self._set_watchdog = float(params[f"{PREFIX}.set_watchdog"])
         self._sdo_timeout = float(params[f"{PREFIX}.sdo_timeout"])
+        #: probe the watchdogs armed at the first arming (then False)
+        self._armed_probe = bool(params[f"{PREFIX}.watchdog_probe"])
         self._endpoints = self._load_endpoints(params)
-        #: messages a user must see (also in ``status``)
-        self.warnings: list[str] = []
         self._bus = None
         #: the control mode the axes were last told (per axis)
         self._mode = [ControlMode.VELOCITY_CONTROL] * len(self._axes)
@@ -177,6 +181,12 @@ class OdriveCanDriver(CanDriver):
                       "relative to the working directory), to read the axis watchdog "
                       "settings over CAN; empty = they cannot be read.",
                       default=""),
+            ParamSpec(f"{PREFIX}.watchdog_probe", "bool",
+                      "At the first arming, arm every axis at zero velocity and send it "
+                      "nothing until its watchdog disarms it (at most max_watchdog_timeout + "
+                      "heartbeat_timeout): the watchdog verified by what it does, on any "
+                      "firmware, without an endpoints file; this verdict replaces "
+                      "configure's.", default=False),
             ParamSpec(f"{PREFIX}.sdo_timeout", "double",
                       "Time a drive has to answer Get_Version or an endpoint read [s].",
                       default=0.2, minimum=0.005, maximum=10.0),
@@ -236,6 +246,9 @@ class OdriveCanDriver(CanDriver):
             raise
 
     def _on_activate(self) -> None:
+        if self._armed_probe:
+            self._armed_probe = False
+            self._probe_watchdogs_armed()
         if self._watchdog_policy == "refuse":
             for i, axis in enumerate(self._axes):
                 if not axis.watchdog.ok:
@@ -372,12 +385,16 @@ class OdriveCanDriver(CanDriver):
         else:
             for i in range(len(self._axes)):
                 self._read_watchdog(i)
-        for i, axis in enumerate(self._axes):
-            if not axis.watchdog.ok:
-                text = (f"{self.devices[i]}: axis watchdog {axis.watchdog.text}: the motor "
-                        "will NOT stop by itself if this controller dies or hangs")
-                self.warnings.append(text)
-                _log.warning(text)
+        for text in self.warnings:
+            _log.warning(text)
+
+    @property
+    def warnings(self) -> list[str]:
+        """What a user must see (also in ``status``): one line per axis whose
+        watchdog is not good enough."""
+        return [f"{self.devices[i]}: axis watchdog {axis.watchdog.text}: the motor will NOT "
+                "stop by itself if this controller dies or hangs"
+                for i, axis in enumerate(self._axes) if axis.watchdog and not axis.watchdog.ok]
 
     def _read_watchdog(self, i: int) -> None:
         """Firmware 0.6: check the board against the endpoints file, write the
@@ -454,20 +471,60 @@ class OdriveCanDriver(CanDriver):
         for node, axis in zip(self.joints.node_ids, self._axes):
             if axis.heartbeat.axis_error & bit:
                 self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors(firmware="0.5"))
+        self._await_silence(bit)
+        for axis in self._axes:
+            axis.watchdog = wd.probed(axis.probe_since, [p[:2] for p in axis.probe], bit,
+                                      self._watchdog_bound, 1.0 / self.control_rate,
+                                      "probed while idle, firmware 0.5")
+            axis.probe_since = None
+
+    def _probe_watchdogs_armed(self) -> None:
+        """``watchdog_probe``: arm every axis at zero velocity, then send
+        nothing until each disarms itself with WATCHDOG_TIMER_EXPIRED (0.6's
+        heartbeat reports active_errors | disarm_reason); then idle."""
+        bit = proto.WATCHDOG_TIMER_EXPIRED[self.firmware]
+        for node in self.joints.node_ids:
+            self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors(firmware=self.firmware))
+            self._send(node, Cmd.SET_CONTROLLER_MODE, proto.set_controller_mode(
+                ControlMode.VELOCITY_CONTROL, self._input_mode))
+            self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
+            self._send(node, Cmd.SET_AXIS_STATE,
+                       proto.set_axis_state(AxisState.CLOSED_LOOP_CONTROL))
+        try:
+            self._await_silence(bit)
+        finally:
+            self._idle_all()
+        for axis in self._axes:
+            # only what follows closed-loop control counts (a bit latched while idle does not)
+            closed = [k for k, p in enumerate(axis.probe)
+                      if p[2] == AxisState.CLOSED_LOOP_CONTROL]
+            if closed:
+                since = axis.probe_since
+                axis.watchdog = wd.probed(since, [p[:2] for p in axis.probe[closed[0]:]], bit,
+                                          self._watchdog_bound, 1.0 / self.control_rate,
+                                          "probed armed at zero velocity")
+            else:
+                hb = axis.heartbeat
+                axis.watchdog = wd.Verdict(False, "not verified: the armed probe never saw "
+                                           f"closed-loop control (state "
+                                           f"{_state_name(hb.axis_state)}, error "
+                                           f"{hb.describe(self.firmware)})")
+            axis.probe_since = None
+        for text in self.warnings:
+            _log.warning(text)
+
+    def _await_silence(self, bit: int) -> None:
+        """Send the axes nothing and record their heartbeats (``probe``) until
+        each reports ``bit`` or max_watchdog_timeout + heartbeat_timeout have
+        passed since the last frame."""
         for axis in self._axes:
             axis.probe_since, axis.probe = axis.last_sent, []
         deadline = max(a.last_sent for a in self._axes) + self._watchdog_bound + \
             self._heartbeat_timeout
-        try:
-            while time.monotonic() < deadline and not all(
-                    any(error & bit for _, error in a.probe) for a in self._axes):
-                self._drain()
-                time.sleep(0.002)
-        finally:
-            for axis in self._axes:
-                axis.watchdog = wd.probed(axis.probe_since, axis.probe, bit,
-                                          self._watchdog_bound, 1.0 / self.control_rate)
-                axis.probe_since = None
+        while time.monotonic() < deadline and not all(
+                any(p[1] & bit for p in a.probe) for a in self._axes):
+            self._drain()
+            time.sleep(0.002)
 
     # -- bus ------------------------------------------------------------------------------
     def _drain(self) -> float:
@@ -507,7 +564,8 @@ class OdriveCanDriver(CanDriver):
                 axis.heartbeat_time = now
                 axis.heartbeats += 1
                 if axis.probe_since is not None and now > axis.probe_since:
-                    axis.probe.append((now, axis.heartbeat.axis_error))
+                    axis.probe.append((now, axis.heartbeat.axis_error,
+                                       axis.heartbeat.axis_state))
             elif cmd == Cmd.TX_SDO and self.firmware == "0.6":
                 reply = proto.SdoReply.decode(bytes(msg.data))
                 count = axis.sdo.get(reply.endpoint_id, (b"", 0))[1]

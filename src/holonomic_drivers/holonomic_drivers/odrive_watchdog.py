@@ -48,9 +48,10 @@ def assess(enabled: bool, timeout: float, bound: float, control_period: float,
 
 
 def probed(since: float, heartbeats: list[tuple[float, int]], bit: int, bound: float,
-           control_period: float) -> Verdict:
-    """Firmware 0.5: the axis heard nothing from us after ``since`` [s];
-    ``heartbeats`` are (stamp [s], axis error) of its heartbeats after it.
+           control_period: float, how: str) -> Verdict:
+    """The axis heard nothing from us after ``since`` [s]; ``heartbeats``
+    are (stamp [s], axis error) of its heartbeats after it; ``how`` the
+    probe was made, for the text.
 
     The watchdog expired after the last heartbeat without ``bit`` and by the
     first one with it: its timeout lies between the two (resolution: one
@@ -61,8 +62,7 @@ def probed(since: float, heartbeats: list[tuple[float, int]], bit: int, bound: f
     for stamp, error in heartbeats:
         if error & bit:
             low, high = clean - since, stamp - since
-            text = (f"expired {low * 1e3:.0f}-{high * 1e3:.0f} ms after the last frame "
-                    "(probed while idle, firmware 0.5)")
+            text = f"expired {low * 1e3:.0f}-{high * 1e3:.0f} ms after the last frame ({how})"
             if low > bound:
                 return Verdict(False, f"{text}: longer than max_watchdog_timeout {bound:g} s")
             if high < MIN_PERIODS * control_period:
@@ -72,4 +72,4 @@ def probed(since: float, heartbeats: list[tuple[float, int]], bit: int, bound: f
     heard = f"{len(heartbeats)} heartbeats over {(clean - since) * 1e3:.0f} ms"
     return Verdict(False, f"OFF or longer than max_watchdog_timeout {bound:g} s (no "
                           f"WATCHDOG_TIMER_EXPIRED in {heard} without a frame from us; "
-                          "probed while idle, firmware 0.5)")
+                          f"{how})")

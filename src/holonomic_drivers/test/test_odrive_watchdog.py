@@ -89,16 +89,16 @@ def test_verdicts_of_a_firmware_0_5_probe():
     # last frame at 10.0 s; heartbeats every 100 ms; the bit first at 10.25:
     # the watchdog expired between 150 and 250 ms after the last frame
     beats = [(10.05, 0), (10.15, 0), (10.25, bit)]
-    v = wd.probed(10.0, beats, bit, 0.3, 0.005)
-    assert v.ok and v.text.startswith("expired 150-250 ms after the last frame")
+    v = wd.probed(10.0, beats, bit, 0.3, 0.005, "how")
+    assert v == wd.Verdict(True, "expired 150-250 ms after the last frame (how)")
     # clean until 10.35 (> 0.3 s after): longer than the bound
-    v = wd.probed(10.0, beats[:2] + [(10.35, 0), (10.45, bit)], bit, 0.3, 0.005)
+    v = wd.probed(10.0, beats[:2] + [(10.35, 0), (10.45, bit)], bit, 0.3, 0.005, "how")
     assert not v.ok and "350-450 ms" in v.text and "longer than" in v.text
     # never seen: off (or longer than the probe lasted)
-    v = wd.probed(10.0, [(10.05, 0), (10.15, 0)], bit, 0.3, 0.005)
+    v = wd.probed(10.0, [(10.05, 0), (10.15, 0)], bit, 0.3, 0.005, "how")
     assert not v.ok and v.text.startswith("OFF or longer") and "2 heartbeats over 150 ms" in v.text
     # another error bit is not the watchdog
-    assert not wd.probed(10.0, [(10.05, 0x40)], bit, 0.3, 0.005).ok
+    assert not wd.probed(10.0, [(10.05, 0x40)], bit, 0.3, 0.005, "how").ok
 
 
 # -- the endpoints file --------------------------------------------------------------------
@@ -280,6 +280,38 @@ def test_0_6_without_an_endpoints_file_the_watchdog_is_unknown(rig_factory):
         rig.driver.status()["left_wheel_joint"]
     with pytest.raises(DriverFault, match="axis watchdog unknown"):
         rig.driver.activate()
+
+
+@pytest.mark.parametrize("timeout, ok", [(0.2, True), (0.0, False)])
+def test_0_6_without_the_file_an_armed_probe_verifies_the_watchdog_by_what_it_does(
+        rig_factory, timeout, ok):
+    """watchdog_probe: at the first arming every axis is armed at zero
+    velocity and left alone; it must disarm itself with WATCHDOG_TIMER_EXPIRED."""
+    rig = rig_factory("0.6", {"odrive_can.watchdog_probe": True,
+                              "odrive_can.watchdog_check": "refuse"},
+                      watchdog_timeout=timeout)
+    rig.driver.configure()
+    assert "watchdog unknown" in rig.driver.status()["left_wheel_joint"]
+    if ok:
+        rig.driver.activate()
+        status = rig.driver.status()
+        assert "watchdog expired" in status["left_wheel_joint"]
+        assert "(probed armed at zero velocity)" in status["left_wheel_joint"]
+        assert not any(k.startswith("warning") for k in status)       # configure's are gone
+        assert all(a.axis_state == AxisState.CLOSED_LOOP_CONTROL for a in rig.axes)
+        # the probe's expiry: each axis disarmed itself after >= 0.2 s of silence
+        for axis in rig.axes:
+            fed, detected = axis.watchdog_expired
+            assert detected - fed >= 0.2
+    else:
+        with pytest.raises(DriverFault, match=r"left_wheel_joint \(ODrive node 0\): axis watchdog "
+                                              r"OFF or longer than max_watchdog_timeout 0.3 s"):
+            rig.driver.activate()
+        assert all(a.axis_state == AxisState.IDLE for a in rig.axes)
+        assert all(a.watchdog_expired is None for a in rig.axes)
+        # a second enable does not probe again: still refused, at once
+        with pytest.raises(DriverFault, match="probed armed at zero velocity"):
+            rig.driver.activate()
 
 
 @pytest.mark.parametrize("timeout, ok", [(0.2, True), (0.0, False), (0.5, False)])
