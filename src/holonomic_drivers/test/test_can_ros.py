@@ -216,8 +216,9 @@ def test_killing_the_loop_process_stops_every_odrive_by_its_axis_watchdog(ros, t
         assert probe.enable(True).success
         probe.drive((0.3, 0.0, 0.0), 0.5)
         assert all(abs(d.velocity_rev_per_s) > 0.1 for d in devices[:2])   # the wheels turn
+        loop = _loop_pid()
         killed = time.time()
-        os.kill(_loop_pid(), signal.SIGKILL)
+        os.kill(loop, signal.SIGKILL)
         wait_until(lambda: all(d.axis_state == AxisState.IDLE for d in devices), 5.0,
                    "every drive idle")
         for d in devices:
