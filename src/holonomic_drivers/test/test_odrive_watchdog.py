@@ -307,7 +307,9 @@ def test_0_6_without_the_file_an_armed_probe_verifies_the_watchdog_by_what_it_do
         with pytest.raises(DriverFault, match=r"left_wheel_joint \(ODrive node 0\): axis watchdog "
                                               r"OFF or longer than max_watchdog_timeout 0.3 s"):
             rig.driver.activate()
-        assert all(a.axis_state == AxisState.IDLE for a in rig.axes)
+        # the probe's IDLE reaches the emulated axes on their thread
+        wait_until(lambda: all(a.axis_state == AxisState.IDLE for a in rig.axes), 2.0,
+                   "every axis idle after the probe")
         assert all(a.watchdog_expired is None for a in rig.axes)
         # a second enable does not probe again: still refused, at once
         with pytest.raises(DriverFault, match="probed armed at zero velocity"):
