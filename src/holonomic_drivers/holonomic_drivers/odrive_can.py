@@ -257,13 +257,7 @@ class OdriveCanDriver(CanDriver):
         # only heartbeats sent after the request count
         seen = [a.heartbeats for a in self._axes]
         self._mode = [ControlMode.VELOCITY_CONTROL] * len(self._axes)
-        for node in self.joints.node_ids:
-            self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors(firmware=self.firmware))
-            self._send(node, Cmd.SET_CONTROLLER_MODE, proto.set_controller_mode(
-                ControlMode.VELOCITY_CONTROL, self._input_mode))
-            self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
-            self._send(node, Cmd.SET_AXIS_STATE,
-                       proto.set_axis_state(AxisState.CLOSED_LOOP_CONTROL))
+        self._request_closed_loop()
         deadline = time.monotonic() + self._startup_timeout
         next_feed = time.monotonic() + ARM_FEED_PERIOD
         while True:
@@ -291,6 +285,16 @@ class OdriveCanDriver(CanDriver):
                 raise DriverFault(f"did not enter closed-loop control ({why}); motors left idle",
                                   self.devices[i])
             time.sleep(0.002)
+
+    def _request_closed_loop(self) -> None:
+        """Every axis: clear errors, velocity control, zero input, closed loop."""
+        for node in self.joints.node_ids:
+            self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors(firmware=self.firmware))
+            self._send(node, Cmd.SET_CONTROLLER_MODE, proto.set_controller_mode(
+                ControlMode.VELOCITY_CONTROL, self._input_mode))
+            self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
+            self._send(node, Cmd.SET_AXIS_STATE,
+                       proto.set_axis_state(AxisState.CLOSED_LOOP_CONTROL))
 
     def _on_deactivate(self) -> None:
         self._idle_all()
@@ -483,13 +487,7 @@ class OdriveCanDriver(CanDriver):
         nothing until each disarms itself with WATCHDOG_TIMER_EXPIRED (0.6's
         heartbeat reports active_errors | disarm_reason); then idle."""
         bit = proto.WATCHDOG_TIMER_EXPIRED[self.firmware]
-        for node in self.joints.node_ids:
-            self._send(node, Cmd.CLEAR_ERRORS, proto.clear_errors(firmware=self.firmware))
-            self._send(node, Cmd.SET_CONTROLLER_MODE, proto.set_controller_mode(
-                ControlMode.VELOCITY_CONTROL, self._input_mode))
-            self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
-            self._send(node, Cmd.SET_AXIS_STATE,
-                       proto.set_axis_state(AxisState.CLOSED_LOOP_CONTROL))
+        self._request_closed_loop()
         try:
             self._await_silence(bit)
         finally:
