@@ -352,7 +352,7 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     # The first status costs 10-25 ms (numpy's percentile and pickle set
     # themselves up on first use): pay it here, not in the cycle a second in.
     # So is numpy's BLAS work buffer: mapped by the first matrix product
-    # that needs it, 10-33 ms under mlockall. In the PCV's drift watch that
+    # that needs it, 10-37 ms under mlockall. In the PCV's drift watch that
     # was the cycle 2 s after the base first moved.
     warm_up_linear_algebra()
     warm = LoopStats(window=2)

@@ -97,7 +97,7 @@ class LoopStats:
     from the diagnostics alone. The minor page faults of all cycles are
     counted too: under mlockall a cycle should take none, and a fault means
     something mapped memory inside the cycle (numpy's BLAS buffer did, for
-    10-33 ms, docs/realtime.md).
+    10-37 ms, docs/realtime.md).
     """
 
     def __init__(self, window: int = 2000):

@@ -82,7 +82,8 @@ def warm_up_linear_algebra() -> None:
     don't need it; ``A.T @ A`` (syrk) or an LU solve do. Under
     ``mlockall(MCL_FUTURE)`` (:func:`lock_memory`) that mapping is faulted in
     and locked page by page inside the call. Measured on the 2-core VM: 8192
-    minor faults and 10-33 ms of CPU, against 0.15 ms unlocked. In the
+    minor faults and 10-37 ms of CPU (10-16 ms in the loop, 23-37 ms as a
+    fresh process's first call), against 0.15 ms unlocked. In the
     loop, that call was the PCV's drift watch's first batch, about 2 s after
     the base first moved: the XR4000's 12-17 ms "controller" spike
     (docs/realtime.md). The first SVD also sets itself up (about 1 ms more).

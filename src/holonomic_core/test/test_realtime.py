@@ -216,7 +216,7 @@ def test_after_the_warm_up_the_drift_watch_maps_no_new_memory():
 
     OpenBLAS maps that 32 MiB buffer on the first product that needs one.
     Under mlockall(MCL_FUTURE) this mapping is faulted in and locked inside
-    that cycle: 8192 minor faults, 10-33 ms, seen as the XR4000's
+    that cycle: 8192 minor faults, 10-37 ms, seen as the XR4000's
     12-17 ms "controller" spike. Its trace is the address space growing by
     the buffer's size. Without the warm-up, the drift watch's first batch
     grows it (measured: 32768 kB). After the warm-up, the same 6 s map
