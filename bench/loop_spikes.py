@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 import time
 
@@ -89,7 +88,6 @@ def main(argv=None) -> int:
     if not args.seconds > 0 or args.runs < 1:
         print("loop_spikes: error: --seconds must be > 0 and --runs >= 1", file=sys.stderr)
         return 2
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     for k in range(args.runs):
         loop = run(args.robot, args.seconds, args.physics_process, not args.velocity,
                    not args.no_realtime)
