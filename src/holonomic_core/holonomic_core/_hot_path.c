@@ -807,6 +807,136 @@ done:
     return out;
 }
 
+/* ---- PCV operational-space dynamics (pcv_base.dynamics) ---- */
+
+/* One body's rows J (nrows x 3) and dJ/dphi of caster geometry g = (sx, sy,
+   b, r, h, cos beta, sin beta) at c = cos phi, s = sin phi, for a point
+   `arm` behind the steering axis; `wheel` adds the rolling row. Mirrors
+   PcvDynamics._caster_rows (steer, roll, d_steer, d_roll and point(arm)). */
+static void
+pcv_body_rows(const double *g, double c, double s, double arm, int wheel,
+              double J[4][3], double dJ[4][3])
+{
+    double sx = g[0], sy = g[1], b = g[2], r = g[3], h = g[4], cb = g[5], sb = g[6];
+    double s0 = -s / b, s1 = c / b, s2 = h * (cb * c + sb * s) / b - 1.0;
+    double d0 = -c / b, d1 = -s / b, d2 = h * (sb * c - cb * s) / b;
+    double px = sx - arm * c, py = sy - arm * s;
+    double ac = arm * c, as_ = arm * s;
+    J[0][0] = 1.0 + as_ * s0;  J[0][1] = as_ * s1;        J[0][2] = -py + as_ * s2;
+    J[1][0] = -ac * s0;        J[1][1] = 1.0 - ac * s1;   J[1][2] = px - ac * s2;
+    dJ[0][0] = ac * s0 + as_ * d0;  dJ[0][1] = ac * s1 + as_ * d1;
+    dJ[0][2] = ac + ac * s2 + as_ * d2;
+    dJ[1][0] = as_ * s0 - ac * d0;  dJ[1][1] = as_ * s1 - ac * d1;
+    dJ[1][2] = as_ + as_ * s2 - ac * d2;
+    J[2][0] = s0;  J[2][1] = s1;  J[2][2] = 1.0 + s2;          /* yaw: wz + phi_dot */
+    dJ[2][0] = d0; dJ[2][1] = d1; dJ[2][2] = d2;
+    if (wheel) {
+        J[3][0] = c / r;  J[3][1] = s / r;  J[3][2] = h * (cb * s - sb * c) / r;
+        dJ[3][0] = -s / r; dJ[3][1] = c / r; dJ[3][2] = h * (cb * c + sb * s) / r;
+    }
+}
+
+/* pcv_terms(positions, twist, geometry, masses) -> (Lambda (3, 3), mu (3,)).
+   positions: the joints (steering angles at the even indices); twist: None
+   (mu = 0) or (vx, vy, wz); geometry: (sx, sy, b, r, h, cos beta, sin beta)
+   per caster; masses: (chassis m, chassis I, fork m, m, I, wheel m, m,
+   I_yaw, I_spin). Mirrors PcvDynamics.terms, sums in the same order. */
+static PyObject *
+pcv_terms(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (check_nargs(nargs, 4, "pcv_terms") < 0)
+        return NULL;
+    PyArrayObject *q_a = as_vector(args[0], "positions"), *t_a = NULL, *g_a = NULL,
+                  *m_a = NULL;
+    PyObject *out = NULL, *lam = NULL, *mu = NULL;
+    if (q_a == NULL)
+        return NULL;
+    int moving = args[1] != Py_None;
+    if (moving) {
+        t_a = as_vector(args[1], "twist");
+        if (t_a == NULL)
+            goto done;
+        if (PyArray_DIM(t_a, 0) != 3) {           /* as unpacking (vx, vy, wz) */
+            PyErr_SetString(PyExc_ValueError, "twist: exactly 3 values (vx, vy, wz)");
+            goto done;
+        }
+    }
+    g_a = as_vector(args[2], "geometry");
+    if (g_a == NULL)
+        goto done;
+    m_a = as_vector(args[3], "masses");
+    if (m_a == NULL || need_length(m_a, 9, "masses") < 0)
+        goto done;
+    npy_intp n = (PyArray_DIM(q_a, 0) + 1) / 2;        /* positions[0::2] */
+    if (n > PyArray_DIM(g_a, 0) / 7) {
+        /* as the Python path: a caster beyond the geometry's */
+        PyErr_SetString(PyExc_IndexError, "tuple index out of range");
+        goto done;
+    }
+    const double *q = PyArray_DATA(q_a), *geo = PyArray_DATA(g_a), *m = PyArray_DATA(m_a);
+    double m_c = m[0], i_c = m[1];
+    double l00 = m_c, l01 = 0.0, l02 = 0.0, l11 = m_c, l12 = 0.0, l22 = i_c;
+    double mu0 = 0.0, mu1 = 0.0, mu2 = 0.0, vx = 0.0, vy = 0.0, wz = 0.0;
+    if (moving) {
+        const double *tw = PyArray_DATA(t_a);
+        vx = tw[0]; vy = tw[1]; wz = tw[2];
+        mu0 = m_c * (-wz * vy);
+        mu1 = m_c * (wz * vx);
+    }
+    for (npy_intp i = 0; i < n; i++) {
+        double phi = q[2 * i], c = cos(phi), s = sin(phi), b = geo[7 * i + 2];
+        for (int wheel = 0; wheel < 2; wheel++) {
+            double J[4][3], dJ[4][3], accel[4] = {0.0, 0.0, 0.0, 0.0};
+            int rows = wheel ? 4 : 3;
+            const double *masses = wheel ? m + 5 : m + 2;
+            pcv_body_rows(geo + 7 * i, c, s, wheel ? b : 0.5 * b, wheel, J, dJ);
+            if (moving) {
+                double v[4];
+                for (int k = 0; k < rows; k++)
+                    v[k] = J[k][0] * vx + J[k][1] * vy + J[k][2] * wz;
+                double phi_dot = v[2] - wz;
+                for (int k = 0; k < rows; k++)
+                    accel[k] = phi_dot * (dJ[k][0] * vx + dJ[k][1] * vy + dJ[k][2] * wz);
+                accel[0] -= wz * v[1];
+                accel[1] += wz * v[0];
+            }
+            for (int k = 0; k < rows; k++) {
+                double w0 = masses[k] * J[k][0], w1 = masses[k] * J[k][1],
+                       w2 = masses[k] * J[k][2];
+                l00 += w0 * J[k][0];
+                l01 += w0 * J[k][1];
+                l02 += w0 * J[k][2];
+                l11 += w1 * J[k][1];
+                l12 += w1 * J[k][2];
+                l22 += w2 * J[k][2];
+                mu0 += w0 * accel[k];
+                mu1 += w1 * accel[k];
+                mu2 += w2 * accel[k];
+            }
+        }
+    }
+    npy_intp dims[2] = {3, 3};
+    lam = PyArray_SimpleNew(2, dims, NPY_DOUBLE);
+    double *o;
+    mu = new_vector(3, &o);
+    if (lam == NULL || mu == NULL)
+        goto done;
+    o[0] = mu0; o[1] = mu1; o[2] = mu2;
+    double *L = PyArray_DATA((PyArrayObject *)lam);
+    L[0] = l00; L[1] = l01; L[2] = l02;
+    L[3] = l01; L[4] = l11; L[5] = l12;
+    L[6] = l02; L[7] = l12; L[8] = l22;
+    out = PyTuple_Pack(2, lam, mu);
+done:
+    Py_XDECREF(lam);
+    Py_XDECREF(mu);
+    Py_DECREF(q_a);
+    Py_XDECREF(t_a);
+    Py_XDECREF(g_a);
+    Py_XDECREF(m_a);
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"limit_twist", (PyCFunction)(void (*)(void))limit_twist, METH_FASTCALL,
      "limit_twist(target, previous, dt, limits) -> twist: TwistLimiter.limit."},
@@ -824,6 +954,8 @@ static PyMethodDef methods[] = {
      "(twist, twist_variance)."},
     {"reading_plausible", (PyCFunction)(void (*)(void))reading_plausible, METH_FASTCALL,
      "reading_plausible(positions, velocities, bound, last, span) -> bool."},
+    {"pcv_terms", (PyCFunction)(void (*)(void))pcv_terms, METH_FASTCALL,
+     "pcv_terms(positions, twist, geometry, masses) -> (Lambda, mu): PcvDynamics.terms."},
     {NULL, NULL, 0, NULL},
 };
 

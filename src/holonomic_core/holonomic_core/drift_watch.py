@@ -16,12 +16,19 @@ to the others.
 The systematic residual appears only when the joints follow the body (torque
 mode): stiff velocity loops impose the configured kinematics on the joints
 and the floor takes the conflict as slip (see docs/calibration.md).
+
+The watch runs inside the 1 kHz control cycle, and a batch's work (the
+residual, its Jacobian, the solve) costs 1.1-1.6 ms of CPU on the 2-core
+development VM, more than a whole cycle. So a full batch is worked off one
+stage per :meth:`DriftWatch.update` call, over the next four calls. Each
+stage is a few hundred microseconds; the numbers are the same, a few
+milliseconds later (docs/realtime.md).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from typing import Iterator, Mapping
 
 import numpy as np
 
@@ -70,6 +77,8 @@ class DriftWatch:
         self._count = 0.0          # forgotten number of residual entries
         self._stamps: list[float] = []
         self._positions: list[np.ndarray] = []
+        #: the batch being worked off, one stage per update (None: none)
+        self._pending: Iterator[None] | None = None
         #: seconds of motion taken into account (forgetting applied)
         self.moving_time = 0.0
         #: latest estimate of theta - nominal [m, rad] (None before enough motion)
@@ -89,23 +98,38 @@ class DriftWatch:
                    values["drift_watch.zero_threshold"], values["drift_watch.window"])
 
     def update(self, stamp: float, positions: np.ndarray) -> None:
-        """One joint reading (kinematic angles [rad]) at ``stamp`` [s]."""
+        """One joint reading (kinematic angles [rad]) at ``stamp`` [s]. Also
+        does the next stage of a batch in progress (see the module docstring)."""
+        if self._pending is not None and next(self._pending, StopIteration) is StopIteration:
+            self._pending = None
         if self._stamps and stamp - self._stamps[-1] < PERIOD - 1e-9:
             return
         self._stamps.append(stamp)
         self._positions.append(np.array(positions, float))
         if len(self._stamps) > BATCH:
-            self._add_batch()
+            self.flush()        # the batch before, if it is still in progress
+            self._pending = self._batch(self._stamps, np.array(self._positions))
             self._stamps, self._positions = self._stamps[-1:], self._positions[-1:]
 
-    def _add_batch(self) -> None:
-        samples = samples_from_readings(self._stamps, np.array(self._positions))
+    def flush(self) -> None:
+        """Finish the batch in progress now (e.g. at the end of a recording)."""
+        if self._pending is not None:
+            for _ in self._pending:
+                pass
+            self._pending = None
+
+    def _batch(self, stamps: list[float], positions: np.ndarray) -> Iterator[None]:
+        """One batch's work in four stages, with a yield between each: the
+        residual, its Jacobian, the normal equations, the solve."""
+        samples = samples_from_readings(stamps, positions)
         if len(samples) < BATCH // 2:          # mostly standing still: nothing to learn
             return
         fun, scale = residual_function(self.family, samples)
         z = np.zeros(len(scale))
         r = fun(z)
+        yield
         J = jacobian(fun, z)
+        yield
         duration = float(samples.durations.sum())
         keep = math.exp(-duration / self.window)
         self._info = keep * self._info + J.T @ J
@@ -113,6 +137,7 @@ class DriftWatch:
         self._sq = keep * self._sq + float(r @ r)
         self._count = keep * self._count + len(r)
         self.moving_time = keep * self.moving_time + duration
+        yield
         self._solve(scale)
 
     def _solve(self, scale: np.ndarray) -> None:

@@ -3,7 +3,8 @@
 The closed forms of a cycle -- the twist limits, the inverse kinematics
 (DDROT and PCV), the joint-rate saturation, the slip_min fit and the DDROT's
 forward kinematics, the odometry's increment, arc and covariance, the twist
-window's line fit, the reading checks -- exist twice: the pure-Python
+window's line fit, the reading checks, the PCV's operational-space terms
+of torque mode -- exist twice: the pure-Python
 reference (in the modules that own each equation) and the C extension
 ``holonomic_core._hot_path``, built by ``make setup`` (colcon builds it from
 ``_hot_path.c``), which does each of them in one call with the same
@@ -12,7 +13,7 @@ equal and which agree to a few ulp).
 
 Selection: the environment variable ``HOLONOMIC_HOT_PATH``, read when a
 cycle object is built (``TwistLimiter``, a kinematics object, ``Odometry``,
-``ReadingMonitor``, ``BaseController``'s saturation):
+``ReadingMonitor``, ``BaseController``'s saturation, ``PcvDynamics``):
 
 * ``auto`` (default): the compiled module when it is built, else the pure
   path with one warning line on stderr -- the numbers are the same, only
@@ -24,7 +25,8 @@ cycle object is built (``TwistLimiter``, a kinematics object, ``Odometry``,
 The dispatching methods (docs/hot_path.md has the table): ``TwistLimiter.limit``,
 ``limits.joint_rate_saturation()``, ``inverse`` and ``estimate`` of the
 kinematics families, ``Odometry.update`` (through the families'
-``hot_path_geometry``) and ``_update_twist``, ``ReadingMonitor.check``.
+``hot_path_geometry``) and ``_update_twist``, ``ReadingMonitor.check``,
+``PcvDynamics.terms``.
 """
 
 from __future__ import annotations

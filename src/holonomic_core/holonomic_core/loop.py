@@ -13,6 +13,7 @@ of cycles: it counts the miss and re-anchors its deadlines to now.
 
 from __future__ import annotations
 
+import resource
 import threading
 import time
 from typing import Callable
@@ -90,6 +91,13 @@ class LoopStats:
     the previous cycle's CPU time (``compute``: the cycle itself was slow,
     e.g. a garbage collection) and the rest of its wall time
     (``preempted``: the cycle was taken off the CPU while it ran).
+
+    The slowest cycle since start (longest compute) is kept with its named
+    parts and the page faults it took, so that a rare spike can be traced
+    from the diagnostics alone. The minor page faults of all cycles are
+    counted too: under mlockall a cycle should take none, and a fault means
+    something mapped memory inside the cycle (numpy's BLAS buffer did, for
+    10-37 ms, docs/realtime.md).
     """
 
     def __init__(self, window: int = 2000):
@@ -112,12 +120,20 @@ class LoopStats:
         self.parts: dict[str, np.ndarray] = {}
         self.parts_max: dict[str, float] = {}
         self._parts_count: dict[str, int] = {}
+        #: minor page faults in the cycles since start, and the cycles that took any
+        self.page_faults = 0
+        self.fault_cycles = 0
+        #: the slowest cycle since start: its number, compute and CPU time
+        #: [s], page faults and named parts [s]
+        self.slowest: dict[str, float] = {}
+        self._cycle_parts: dict[str, float] = {}     # this cycle's parts so far
 
     def add(self, period: float, compute: float, late: float = 0.0,
-            cpu: float | None = None) -> None:
+            cpu: float | None = None, faults: int = 0) -> None:
         """One cycle: the period that ended at its start, its compute
         (wall) time, how late it woke after its deadline and the CPU time its
-        compute took (None: the whole compute time) [s]."""
+        compute took (None: the whole compute time) [s], and the minor page
+        faults it took. The parts added since the last cycle are its parts."""
         i = self.count % self.periods.size
         self.periods[i] = period
         self.compute[i] = compute
@@ -126,7 +142,14 @@ class LoopStats:
         cpu = compute if cpu is None else min(cpu, compute)
         preempted = compute - cpu
         self.max_late = max(self.max_late, late)
-        self.max_compute = max(self.max_compute, compute)
+        if faults:
+            self.page_faults += faults
+            self.fault_cycles += 1
+        if compute > self.max_compute:
+            self.max_compute = compute
+            self.slowest = {"cycle": self.count, "compute": compute, "cpu": cpu,
+                            "faults": faults, **self._cycle_parts}
+        self._cycle_parts.clear()
         self.max_preempted = max(self.max_preempted, preempted)
         if period > self.max_period:
             self.max_period = period
@@ -140,8 +163,14 @@ class LoopStats:
             self.over_2ms_causes[max(causes, key=causes.get)] += 1
         self._previous = (compute, cpu)
 
+    def discard_cycle(self) -> None:
+        """Forget the parts added for a cycle that is not added (the first:
+        it has no period)."""
+        self._cycle_parts.clear()
+
     def add_part(self, name: str, seconds: float) -> None:
         """The time [s] one named part of this cycle took."""
+        self._cycle_parts[name] = seconds
         ring = self.parts.get(name)
         if ring is None:
             ring = self.parts[name] = np.zeros(self.periods.size)
@@ -158,16 +187,27 @@ class LoopStats:
         [ms], compute p99 [ms], overruns and periods over 2 ms / 5 ms since
         start; the split: wake-up lateness p99 and max, compute max, time
         preempted during a compute max [ms], the periods over 2 ms by cause,
-        and each named part's p99 over the window and max since start [ms]."""
+        and each named part's p99 over the window and max since start [ms];
+        page faults since start and the cycles that took them; the slowest
+        cycle since start (its compute is compute_max_ms): its number, CPU
+        time [ms], page faults and each of its named parts [ms]."""
         n = min(self.count, self.periods.size)
+        slowest = self.slowest
         split = {"wake_late_p99_ms": 0.0, "wake_late_max_ms": 1e3 * self.max_late,
                  "compute_max_ms": 1e3 * self.max_compute,
                  "preempted_max_ms": 1e3 * self.max_preempted,
-                 **{f"over_2ms_{k}": v for k, v in self.over_2ms_causes.items()}}
+                 **{f"over_2ms_{k}": v for k, v in self.over_2ms_causes.items()},
+                 "page_faults": self.page_faults, "page_fault_cycles": self.fault_cycles,
+                 "slowest_cycle": slowest.get("cycle", 0),
+                 "slowest_cpu_ms": 1e3 * slowest.get("cpu", 0.0),
+                 "slowest_page_faults": slowest.get("faults", 0)}
         for name, ring in self.parts.items():
             m = min(self._parts_count[name], ring.size)
             split[f"{name}_p99_ms"] = 1e3 * _percentile(ring[:m], 99)
             split[f"{name}_max_ms"] = 1e3 * self.parts_max[name]
+        for name, seconds in slowest.items():
+            if name not in ("cycle", "compute", "cpu", "faults"):
+                split[f"slowest_{name}_ms"] = 1e3 * seconds
         if n == 0:
             return {"rate_hz": 0.0, "period_p50_ms": 0.0, "period_p99_ms": 0.0,
                     "period_window_max_ms": 0.0, "period_max_ms": 0.0,
@@ -230,11 +270,14 @@ class ControlLoop:
     def _run(self) -> None:
         clock = time.perf_counter
         cpu_clock = time.thread_time      # this thread's CPU time: compute vs preempted
+        usage = resource.getrusage        # minor page faults: ~1 µs a call
+        thread = resource.RUSAGE_THREAD
         deadline = clock()
         last: float | None = None
         while not self._stop.is_set():
             start = clock()
             cpu_start = cpu_clock()
+            faults_start = usage(thread).ru_minflt
             try:
                 self._step()
             except Exception as exc:  # keep the loop alive; the owner decides
@@ -243,7 +286,9 @@ class ControlLoop:
             end = clock()
             if last is not None:
                 self.stats.add(start - last, end - start, max(0.0, start - deadline),
-                               cpu_clock() - cpu_start)
+                               cpu_clock() - cpu_start, usage(thread).ru_minflt - faults_start)
+            else:
+                self.stats.discard_cycle()
             last = start
             deadline += self.period
             if end - deadline > self.period:

@@ -73,6 +73,35 @@ def lock_memory() -> str | None:
     return None
 
 
+def warm_up_linear_algebra() -> None:
+    """Do numpy's one-time BLAS and LAPACK set-up now, before the loop's first
+    cycle, instead of inside whichever cycle first needs it.
+
+    OpenBLAS, numpy's linear algebra, maps a 32 MiB work buffer on the first
+    call that needs one and then keeps it. Products of 2x2 and 3x3 matrices
+    don't need it; ``A.T @ A`` (syrk) or an LU solve do. Under
+    ``mlockall(MCL_FUTURE)`` (:func:`lock_memory`) that mapping is faulted in
+    and locked page by page inside the call. Measured on the 2-core VM: 8192
+    minor faults and 10-37 ms of CPU (10-16 ms in the loop, 23-37 ms as a
+    fresh process's first call), against 0.15 ms unlocked. In the
+    loop, that call was the PCV's drift watch's first batch, about 2 s after
+    the base first moved: the XR4000's 12-17 ms "controller" spike
+    (docs/realtime.md). The first SVD also sets itself up (about 1 ms more).
+    Each routine here is one the cycle can reach: the drift watch's ``J.T @ J``,
+    ``pinv`` and ``solve``, the torque law's ``pinv`` distribution, and the
+    estimators' ``lstsq``. Without mlockall it costs about 0.2 ms. It leaves
+    the buffer mapped, and locked under mlockall.
+    """
+    import numpy as np
+
+    a = np.eye(4) + 0.5                      # symmetric, positive definite
+    a.T @ a                                  # level-3 product: maps the buffer
+    a @ a
+    np.linalg.solve(a, np.ones(4))           # LU (getrf/getrs)
+    np.linalg.pinv(a)                        # SVD (gesdd)
+    np.linalg.lstsq(a, np.ones(4), rcond=None)
+
+
 def tighten_timer_slack(nanoseconds: int = 1000) -> bool:
     """Let the kernel wake the calling thread's sleeps at most ``nanoseconds``
     after their deadline (``prctl(PR_SET_TIMERSLACK)``; the default is 50 µs,

@@ -26,7 +26,10 @@ def test_loop_stats_summary_over_the_window_and_since_start():
                                "periods_over_5ms": 0, "wake_late_p99_ms": 0.0,
                                "wake_late_max_ms": 0.0, "compute_max_ms": 0.0,
                                "preempted_max_ms": 0.0, "over_2ms_woke_late": 0,
-                               "over_2ms_compute": 0, "over_2ms_preempted": 0}
+                               "over_2ms_compute": 0, "over_2ms_preempted": 0,
+                               "page_faults": 0, "page_fault_cycles": 0,
+                               "slowest_cycle": 0, "slowest_cpu_ms": 0.0,
+                               "slowest_page_faults": 0}
     # six cycles in a window of four: the 9 ms period (second) leaves the
     # window but stays the maximum since start
     for period, compute in ((0.005, 0.001), (0.009, 0.002), (0.004, 0.001),
@@ -204,6 +207,60 @@ def test_boundaries_and_counts_of_the_long_period_causes():
     on_time = LoopStats()
     on_time.add(0.001, 0.0002)
     assert on_time.summary()["wake_late_max_ms"] == 0.0
+
+
+def test_the_slowest_cycle_is_kept_with_its_parts_and_page_faults():
+    """By hand: cycle 2 (compute 1.2 ms, its parts physics 0.3 and controller
+    0.8 ms, 12 page faults) is the slowest of three. Cycle 3 is faster and
+    does not replace it, though its controller part (0.9 ms) is the largest
+    since start. Faults are counted over all cycles: 12 + 3 in two cycles.
+    A discarded cycle's parts (the loop's first, which has no period) are in
+    no record."""
+    stats = LoopStats(window=8)
+    stats.add_part("controller", 0.005)            # a first cycle's part
+    stats.discard_cycle()
+    stats.add_part("physics", 0.0002)
+    stats.add_part("controller", 0.0004)
+    stats.add(0.001, 0.0007, cpu=0.0007)                        # cycle 1
+    stats.add_part("physics", 0.0003)
+    stats.add_part("controller", 0.0008)
+    stats.add(0.001, 0.0012, cpu=0.0011, faults=12)             # cycle 2: the slowest
+    stats.add_part("controller", 0.0009)
+    stats.add(0.0012, 0.001, cpu=0.001, faults=3)               # cycle 3
+    s = stats.summary()
+    assert s["compute_max_ms"] == pytest.approx(1.2)
+    assert (s["slowest_cycle"], s["slowest_page_faults"]) == (2, 12)
+    assert s["slowest_cpu_ms"] == pytest.approx(1.1)
+    assert s["slowest_physics_ms"] == pytest.approx(0.3)
+    assert s["slowest_controller_ms"] == pytest.approx(0.8)
+    assert s["controller_max_ms"] == pytest.approx(5.0)      # parts_max: all add_part calls
+    assert (s["page_faults"], s["page_fault_cycles"]) == (15, 2)
+
+
+def test_the_loop_counts_the_page_faults_a_cycle_takes():
+    """A cycle that maps 256 fresh pages and writes one byte to each takes
+    at least 256 minor page faults (one per page, first touch), and the
+    loop's statistics count them."""
+    import mmap
+    done = threading.Event()
+    cycles = []
+    pages = 256
+
+    def step():
+        cycles.append(1)
+        if len(cycles) == 5:
+            block = mmap.mmap(-1, pages * mmap.PAGESIZE)
+            for k in range(pages):
+                block[k * mmap.PAGESIZE] = 1
+            block.close()
+        if len(cycles) == 8:
+            done.set()
+
+    loop = ControlLoop(0.002, step, name="test_faults")
+    _run_until(loop, done)
+    loop.stop()
+    assert loop.stats.page_faults >= pages
+    assert loop.stats.fault_cycles >= 1
 
 
 def test_loop_parameters_defaults_and_ranges():

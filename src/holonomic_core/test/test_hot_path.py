@@ -284,6 +284,50 @@ def test_objects_built_with_compiled_selected_dispatch_to_it(monkeypatch, robot)
         limiter.limit(np.zeros(2), np.zeros(3), 0.01)
 
 
+# -- PCV dynamics (torque mode) ------------------------------------------------------
+
+@pytest.mark.parametrize("robot", ["xr4000", "comr3"])
+def test_the_pcv_dynamics_terms_are_bitwise_those_of_the_pure_path(monkeypatch, robot):
+    """Lambda and mu of PcvDynamics.terms (torque mode's eq. 4 and bias, once a
+    cycle): random configurations and twists, every caster where sin or cos
+    vanishes and at 1e6 rad, no twist, rest, lists, and NaN and inf inputs,
+    which propagate alike. The pure path against the numpy reference:
+    pcv_base/test/test_dynamics_reference.py."""
+    from pcv_base.dynamics import PcvDynamics
+    from holonomic_core.model import load_model
+    model = load_model(robot)
+    pure, compiled = both(monkeypatch, lambda: PcvDynamics.from_model(model))
+    n = len(model.joint_names)
+    rng = np.random.default_rng(11)
+    cases = [(rng.uniform(-7.0, 7.0, n), rng.normal(0.0, 1.5, 3)) for _ in range(300)]
+    for phi in (0.0, math.pi / 2, -math.pi / 2, math.pi, 1e6):
+        q = rng.uniform(-math.pi, math.pi, n)
+        q[0::2] = phi
+        cases += [(q, None), (q, np.zeros(3)), (q, np.array([0.4, -0.3, 2.0]))]
+    q = rng.uniform(-3.0, 3.0, n)
+    cases += [(list(q), (0.3, -0.2, 0.9)), (tuple(q), None),
+              (q, np.array([math.nan, 0.0, 0.0])), (q, np.array([0.0, 0.0, math.inf]))]
+    q_nan = q.copy()
+    q_nan[2] = math.nan
+    cases.append((q_nan, np.array([0.2, 0.1, 0.3])))
+    for q, twist in cases:
+        for a, b in zip(pure.terms(q, twist), compiled.terms(q, twist)):
+            # a NaN's sign and payload depend on which operand the CPU
+            # propagates (the compiler may swap a product's operands):
+            # NaN where the pure path has NaN, every other entry bitwise
+            nan = np.isnan(a)
+            assert np.array_equal(nan, np.isnan(b)), (q, twist)
+            assert same_bits(a[~nan], b[~nan]), (q, twist)
+    # more positions than casters: both refuse (IndexError); fewer: both sum
+    # the casters given
+    for path in (pure, compiled):
+        with pytest.raises(IndexError):
+            path.terms(np.zeros(n + 2), None)
+    fewer, twist = rng.uniform(-3.0, 3.0, n - 2), (0.2, 0.1, 0.3)
+    for a, b in zip(pure.terms(fewer, twist), compiled.terms(fewer, twist)):
+        assert same_bits(a, b)
+
+
 # -- reading checks ---------------------------------------------------------------
 
 def test_reading_checks_give_the_pure_path_verdicts(monkeypatch):

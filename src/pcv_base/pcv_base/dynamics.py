@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from holonomic_core import hot_path
 from pcv_base.torque_distribution import torque_distribution
 
 
@@ -87,6 +88,9 @@ class PcvDynamics:
     and 3x3 matrices: they are written as scalar arithmetic on Python floats,
     which costs a fraction of the same work as numpy calls on arrays that
     small (numpy's per-call overhead is a few microseconds whatever the size).
+    :meth:`terms` has a compiled twin (``holonomic_core._hot_path.pcv_terms``,
+    the same operations in the same order: bitwise the same numbers), used
+    as the kinematics' closed forms are (``HOLONOMIC_HOT_PATH``, read here).
     """
 
     def __init__(self, kin, body: BodyParams):
@@ -100,6 +104,11 @@ class PcvDynamics:
         self._geometry = tuple((float(c.axis[0]), float(c.axis[1]), float(c.caster_offset),
                                 float(c.wheel_radius), float(c.h), math.cos(c.beta),
                                 math.sin(c.beta)) for c in kin.casters)
+        #: the compiled terms (hot_path) and their inputs; None: the pure path
+        self._hot = hot_path.module()
+        self._hot_geometry = np.array(self._geometry, dtype=float).ravel()
+        self._hot_masses = np.array((body.chassis_mass, body.chassis_inertia,
+                                     *self._fork_m, *self._wheel_m), dtype=float)
 
     @classmethod
     def from_model(cls, model) -> "PcvDynamics":
@@ -164,6 +173,12 @@ class PcvDynamics:
         (G_dot x_dot) plus, on the linear rows, the base frame's turn
         ``wz k x v`` (``v = J_b x_dot``).
         """
+        if self._hot is not None:
+            return self._hot.pcv_terms(positions, twist, self._hot_geometry, self._hot_masses)
+        return self._terms_pure(positions, twist)
+
+    def _terms_pure(self, positions, twist=None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`terms` in Python: the reference of the compiled twin."""
         body = self.body
         m_c, i_c = body.chassis_mass, body.chassis_inertia
         l00, l01, l02, l11, l12, l22 = m_c, 0.0, 0.0, m_c, 0.0, i_c

@@ -9,6 +9,10 @@ Tolerance: the two sum the same products in a different order (numpy's
 matmul against a running sum), so they agree to rounding. Measured over these
 inputs, relative to the largest entry: Lambda <= 6.6e-16, mu <= 1.5e-14 (its
 body terms partly cancel), the distribution bitwise equal; asserted 1e-12.
+
+The terms have a compiled twin (``_hot_path.pcv_terms``): every test of the
+terms runs on both paths (``HOLONOMIC_HOT_PATH`` pure and compiled), and
+test_hot_path checks that the two are bitwise equal.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import math
 import numpy as np
 import pytest
 
+from holonomic_core import hot_path
 from holonomic_core.model import load_model
 from pcv_base.dynamics import PcvDynamics
 from pcv_base.torque_distribution import torque_distribution
@@ -55,12 +60,21 @@ def assert_close(new, ref):
     assert np.max(np.abs(np.asarray(new) - ref)) <= TOL * scale, (new, ref)
 
 
-@pytest.fixture(params=[("xr4000", 4), ("comr3", 3)], ids=["xr4000", "comr3"])
-def dynamics(request):
-    """The loops run over the robot's n casters, not a fixed 4."""
-    robot, n_casters = request.param
+@pytest.fixture(params=[("xr4000", 4, "pure"), ("comr3", 3, "pure"),
+                        ("xr4000", 4, "compiled"), ("comr3", 3, "compiled")],
+                ids=["xr4000-pure", "comr3-pure", "xr4000-compiled", "comr3-compiled"])
+def dynamics(request, monkeypatch):
+    """The loops run over the robot's n casters, not a fixed 4; built on the
+    pure-Python or the compiled path (the env var is read when it is built)."""
+    robot, n_casters, path = request.param
+    monkeypatch.setenv(hot_path.ENV, path)
     dyn = PcvDynamics.from_model(load_model(robot))
     assert len(dyn.kin.casters) == n_casters
+    # a twist of four values: the compiled twin checks the length itself
+    # (its message shows the call went there), Python's unpacking refuses it
+    message = "twist: exactly 3 values" if path == "compiled" else "too many values to unpack"
+    with pytest.raises(ValueError, match=message):
+        dyn.terms(np.zeros(2 * n_casters), (0.0, 0.0, 0.0, 0.0))
     return dyn
 
 
@@ -108,14 +122,16 @@ def test_torque_distribution_matches_the_numpy_reference(dynamics):
             assert_close(tau, ref_torque_distribution(kin, q, force))
 
 
+@pytest.mark.parametrize("path", ["pure", "compiled"])
 @pytest.mark.parametrize("robot", ["xr4000", "comr3"])
-def test_torque_law_matches_the_numpy_reference(robot):
+def test_torque_law_matches_the_numpy_reference(robot, path, monkeypatch):
     """OperationalSpaceController.step as BaseController builds it, cycle by
     cycle against the reference law: a smooth drive, then the base held back
     (the reference pulled to MAX_ERROR) and a NaN twist (zero torques)."""
     from holonomic_core.config import load_config
     from holonomic_core.torque import OperationalSpaceController
 
+    monkeypatch.setenv(hot_path.ENV, path)
     cfg = load_config(robot, {"control_mode": "torque"})
     c, model = cfg.controller, cfg.model
     efforts = [j.max_effort for j in model.joint_limits]
