@@ -144,13 +144,14 @@ class PhysicsLink:
     """The loop's end: starts the physics process for a SimDriver's
     ``model`` and validated ``params`` (``sim.physics_process`` set false
     for the inner driver) at ``control_rate`` [Hz], then carries commands
-    and the latest state. Not thread-safe: the loop's thread only (as the
-    driver)."""
+    and the latest state. It is the SimDriver's plant
+    (:class:`holonomic_sim.sim_driver.Plant`), as the in-process world is.
+    Not thread-safe: the loop's thread only (as the driver)."""
 
     def __init__(self, model, params, control_rate: float):
         self.layout = StateLayout(len(model.joint_names))
         self._record = np.zeros(self.layout.size)
-        self._command = np.zeros(1 + len(model.joint_names))
+        self._command_record = np.zeros(1 + len(model.joint_names))
         self._fault_text = "the simulated base failed"
         self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         cmd_r, self._cmd_w = os.pipe()
@@ -230,9 +231,10 @@ class PhysicsLink:
         self._record[:] = np.frombuffer(data, dtype=np.float64)
         return True
 
-    def latest(self) -> JointReading:
+    def read(self) -> JointReading:
         """The newest state as a reading (stamp: sim time [s]); the last one
-        again when the physics has not stepped since."""
+        again when the physics has not stepped since. The physics process
+        applied the encoders' zero errors and the tip-over check."""
         self._drain()
         r, lay = self._record, self.layout
         if r[_FLAGS]:
@@ -246,6 +248,7 @@ class PhysicsLink:
                 if message[0] == "fault":
                     self._fault_text = message[1]
             raise DriverCommunicationError(self._fault_text, "pybullet")
+        # the reading's stamp: the sim time [s] of the newest state
         return JointReading(float(r[_STAMP]), r[lay.positions()].copy(),
                             r[lay.velocities()].copy(), r[lay.efforts()].copy())
 
@@ -266,12 +269,33 @@ class PhysicsLink:
         return GroundTruth(float(r[_STAMP]), r[lay.truth_pose()].copy(),
                            r[lay.truth_twist()].copy())
 
-    def command(self, mode: float, values=None) -> None:
+    def release(self) -> None:
+        """Brakes released, every joint commanded to rest (activate)."""
+        self._command(VELOCITY)
+
+    def hold(self) -> None:
+        """Brakes on: the joints held still (deactivate)."""
+        self._command(HOLD)
+
+    def command_velocities(self, velocities: np.ndarray) -> None:
+        """Joint speeds [rad/s], one per joint."""
+        self._command(VELOCITY, velocities)
+
+    def command_efforts(self, efforts: np.ndarray) -> None:
+        """Joint torques [N m], one per joint."""
+        self._command(EFFORT, efforts)
+
+    def status(self) -> dict[str, str]:
+        """The physics process's line of the driver's status."""
+        return {"physics_process": f"pid {self.pid}, {self.info['scheduling']}, "
+                                   f"{self.lost_periods} periods lost"}
+
+    def _command(self, mode: float, values=None) -> None:
         """Send a command: HOLD, or VELOCITY / EFFORT with one value per
         joint. A full pipe (the physics stalled) drops it: the next one
         carries the whole command again. A dead physics process is reported
         by the next read, not here (deactivate must not fail)."""
-        c = self._command
+        c = self._command_record
         c[0] = mode
         c[1:] = 0.0 if values is None else values
         try:
