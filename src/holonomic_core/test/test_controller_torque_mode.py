@@ -136,6 +136,28 @@ def test_a_cmd_vel_cycle_writes_the_law_s_torques_for_the_limited_twist():
                                rtol=1e-9)
 
 
+def test_at_the_joint_speed_limits_the_law_tracks_the_saturated_twist():
+    """Sideways (vy 0.5 m/s) with the casters near straight ahead: each
+    steering joint must turn at about vy / b = vy / 0.02 m, which reaches its
+    12 rad/s limit near vy = 0.24 m/s, 24 cycles into the 0.01 m/s-per-cycle
+    ramp. Then the joint rates are scaled (saturation < 1), and the torque
+    law's reference is the scaled twist: the one the joints can do, which the
+    limiter continues from (ctrl.twist_command), not the unscaled one.
+    (The joints stand still, so the reading monitor's tracking check would
+    fault 0.5 s after the steering commands pass 0.3 x 12 rad/s, near cycle
+    8 + 100: 40 cycles stay clear of it.)"""
+    ctrl, driver, clock, _ = make()
+    arm(ctrl, clock)
+    for _ in range(40):
+        ctrl.set_command((0.0, 0.5, 0.0))
+        run(ctrl, clock)
+    assert ctrl.state is ControllerState.ARMED, ctrl.fault
+    assert ctrl.saturation < 1.0
+    np.testing.assert_allclose(ctrl.torque.ref_twist, ctrl.twist_command, rtol=1e-12)
+    rates = ctrl.model.inverse(POSITIONS, ctrl.torque.ref_twist)
+    assert np.max(np.abs(rates) / ctrl.model.max_joint_velocity) == pytest.approx(1.0, abs=1e-9)
+
+
 def test_a_trajectory_sample_is_tracked_directly():
     """follow(): the sample's pose, twist and acceleration are the reference
     (no limiter in between). Sample: pose (0.01, 0.02, 0.03) in odom, twist
