@@ -404,8 +404,8 @@ def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
         send(sock, ("error", str(exc)))
         return 2
     send(sock, ("ready", {"hidden_truth": driver.hidden_truth,
-                           "wheel_radii": driver.wheel_radii,
-                           "friction": driver.friction, "scheduling": scheduling}))
+                          "wheel_radii": driver.wheel_radii,
+                          "friction": driver.friction, "scheduling": scheduling}))
     layout = StateLayout(len(model.joint_names))
     record = np.zeros(layout.size)
     width = 8 * (1 + layout.joints)
