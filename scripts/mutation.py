@@ -84,8 +84,9 @@ MODULES = {
     "loop": ("src/holonomic_core/holonomic_core/loop.py",
              [CORE_TESTS + "test_control_loop.py"]),
     "controller": ("src/holonomic_core/holonomic_core/controller.py",
-                   [CORE_TESTS + "test_controller_core.py", CORE_TESTS + "test_reading_monitor.py",
-                    CORE_TESTS + "test_slip_monitor.py",
+                   [CORE_TESTS + "test_controller_core.py",
+                    CORE_TESTS + "test_controller_torque_mode.py",
+                    CORE_TESTS + "test_reading_monitor.py", CORE_TESTS + "test_slip_monitor.py",
                     # (the other calibration tests fit recordings: a minute and a half)
                     CORE_TESTS + "test_calibration.py::"
                     "test_drift_watch_names_the_caster_and_the_parameter",

@@ -15,7 +15,6 @@ import concurrent.futures
 import fcntl
 import itertools
 import os
-import pickle
 import selectors
 import signal
 import socket
@@ -187,11 +186,10 @@ class LoopClient:
     def _await_ready(self) -> None:
         deadline = time.monotonic() + START_TIMEOUT
         while True:
-            ready = self._sock.recv(wire.MAX_MESSAGE) if self._poll(0.1) else None
-            if ready == b"":
-                raise LoopLost(f"the control loop ended while starting{self._exit_text()}")
-            if ready:
-                message = pickle.loads(ready)
+            if self._poll(0.1):
+                message = wire.receive(self._sock)
+                if message is None:
+                    raise LoopLost(f"the control loop ended while starting{self._exit_text()}")
                 if message[0] == "ready":
                     for link, info in zip(self.links, message[1]):
                         link.info = info
@@ -274,13 +272,9 @@ class LoopClient:
                     link.on_lost(self._lost)
 
     def _on_control(self) -> bool:
-        try:
-            data = self._sock.recv(wire.MAX_MESSAGE)
-        except OSError:
-            data = b""
-        if not data:
+        message = wire.receive(self._sock)
+        if message is None:
             return False
-        message = pickle.loads(data)
         kind = message[0]
         if kind == "reply":
             with self._pending_lock:

@@ -254,15 +254,13 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     def poll_control() -> None:
         while True:
             try:
-                data = sock.recv(wire.MAX_MESSAGE)
+                message = wire.receive(sock)
             except BlockingIOError:
                 return
-            except OSError:
-                data = b""
-            if not data:            # the node is gone: stop the motors
+            if message is None:     # the node is gone: stop the motors
                 state["loop"].stop(timeout=0.0)
                 return
-            handle(pickle.loads(data))
+            handle(message)
 
     def answer(r: _Robot) -> None:
         still = []
@@ -407,7 +405,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     sock = socket.socket(fileno=int(argv[0]))
     heartbeat = mmap.mmap(int(argv[1]), wire.HEARTBEAT_SIZE)
-    setup = pickle.loads(sock.recv(wire.MAX_MESSAGE))
+    setup = wire.receive(sock)
+    if setup is None:                # the node went before sending the set-up
+        return 0
     for r in setup.robots:
         os.set_blocking(r.command_fd, False)
         os.set_blocking(r.state_fd, False)

@@ -1,5 +1,6 @@
 """The wire between the ROS node and its control loop process (both sides):
-the fixed record formats, the control messages' framing, the heartbeat.
+the fixed record formats, the control messages (framed by
+:mod:`holonomic_core.control_socket`), the heartbeat.
 
 Everything is plain bytes on pipes and a ``SOCK_SEQPACKET`` socket, so the
 two sides need no shared Python objects; see
@@ -8,12 +9,14 @@ two sides need no shared Python objects; see
 
 from __future__ import annotations
 
-import pickle
-import socket
 import struct
 from dataclasses import dataclass
 
 import numpy as np
+
+# the control messages' framing (one pickled message per packet), shared
+# with the simulator's physics process: ``wire.send`` / ``wire.receive``
+from holonomic_core.control_socket import MAX_MESSAGE, receive, send  # noqa: F401
 
 #: a command record: vx [m/s], vy [m/s], wz [rad/s] in base_link and the
 #: time.monotonic() [s] it was received (CLOCK_MONOTONIC: one clock for
@@ -23,18 +26,6 @@ COMMAND = struct.Struct("<4d")
 PUBLISH, CLOCK = 1, 2
 #: the heartbeat block: one int64, the number of cycles run
 HEARTBEAT_SIZE = 8
-#: the largest control message [bytes] (a status with a long driver report)
-MAX_MESSAGE = 1 << 20
-
-
-def send(sock: socket.socket, message) -> bool:
-    """Send one pickled message; False when the peer is gone or its buffer
-    is full (the loop never waits for the node)."""
-    try:
-        sock.send(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
-        return True
-    except (BlockingIOError, BrokenPipeError, ConnectionError, OSError):
-        return False
 
 
 _SCALARS = ("flags", "cycle", "stamp", "state", "stale", "saturation", "truth_valid")

@@ -116,10 +116,10 @@ def test_simulator_rests_base_link_on_the_floor_and_places_links_as_the_tree(rob
     tree = LinkTree.from_urdf(generate_urdf(model))
     rng = np.random.default_rng(5)
     with SimDriver(model, cfg.values, 200.0) as driver:
-        body, cid = driver._robot.body, driver._world.client
+        body, cid = driver.plant.robot.body, driver.plant.world.client
         steer = [j for j in model.joint_names if not j.endswith("wheel_joint")]
         for name in steer:
-            idx = driver._robot.joint_indices[model.joint_names.index(name)]
+            idx = driver.plant.robot.joint_indices[model.joint_names.index(name)]
             pb.resetJointState(body, idx, rng.uniform(-math.pi, math.pi), physicsClientId=cid)
         for _ in range(40):
             reading = driver.read()
@@ -127,7 +127,7 @@ def test_simulator_rests_base_link_on_the_floor_and_places_links_as_the_tree(rob
         # base_link's origin = pybullet's inertial base minus the body's height
         # settled into the floor by 1.0e-5 m (measured, both robots): 1e-4
         assert com[2] == pytest.approx(base_height(model), abs=1e-4)
-        x, y, yaw = driver._robot.world_pose()
+        x, y, yaw = driver.plant.robot.world_pose()
         origin_z = com[2] - rotate(orientation, (0.0, 0.0, base_height(model)))[2]
         assert origin_z == pytest.approx(0.0, abs=1e-4)
         poses = tree.poses_in_root(dict(zip(model.joint_names, reading.positions)))

@@ -80,6 +80,8 @@ def test_controller_names_the_caster_that_keeps_slipping():
     # robust leaves the spinning caster out: it alone carries the residual
     # (0.3 m/s, its disagreement with the others), the others none
     assert names == ["rear_left"]
+    # the status the diagnostics are built from says the same (at the reading's stamp)
+    assert [name for name, _ in ctrl.status().slipping] == ["rear_left"]
     np.testing.assert_allclose(ctrl.odometry.residual, [0.0, 0.3, 0.0, 0.0], atol=1e-6)
     # and the odometry follows the three good casters: 0.3 m/s, not more
     assert abs(ctrl.odometry.twist[0] - 0.3) < 1e-3

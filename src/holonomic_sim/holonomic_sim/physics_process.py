@@ -35,7 +35,8 @@ PIPE_BUF; no seqlock'd shared memory, which needs explicit barriers on ARM):
   the last, and re-uses it when none is new (the reading's stamp then does
   not advance: the controller's reading monitor tolerates that up to
   ``safety.reading_timeout``);
-* control, both ways: a ``SOCK_SEQPACKET`` socket of pickled messages (the
+* control, both ways: a ``SOCK_SEQPACKET`` socket of pickled messages
+  (:mod:`holonomic_core.control_socket`, as between the node and the loop: the
   set-up, ``ready`` with what configure learnt, fault texts, wheel-contact
   requests and replies).
 
@@ -61,7 +62,6 @@ the rest and the real-time budget (95 % of each second) is far off.
 from __future__ import annotations
 
 import os
-import pickle
 import select
 import signal
 import socket
@@ -72,6 +72,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from holonomic_core.control_socket import receive, send
 from holonomic_core.driver import DriverCommunicationError, GroundTruth, JointReading
 from holonomic_core.schema import ConfigError
 
@@ -85,8 +86,6 @@ MAX_CATCH_UP = 20
 START_TIMEOUT = 60.0
 REQUEST_TIMEOUT = 1.0
 STOP_TIMEOUT = 5.0
-#: the largest control message [bytes]
-MAX_MESSAGE = 1 << 20
 #: the device name in driver errors
 DEVICE = "physics process"
 
@@ -141,25 +140,18 @@ def _read_newest(fd: int, size: int) -> bytes | None:
         newest = data[-size:]
 
 
-def _send(sock: socket.socket, message) -> bool:
-    try:
-        sock.send(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
-        return True
-    except OSError:
-        return False
-
-
 class PhysicsLink:
     """The loop's end: starts the physics process for a SimDriver's
     ``model`` and validated ``params`` (``sim.physics_process`` set false
     for the inner driver) at ``control_rate`` [Hz], then carries commands
-    and the latest state. Not thread-safe: the loop's thread only (as the
-    driver)."""
+    and the latest state. It is the SimDriver's plant
+    (:class:`holonomic_sim.sim_driver.Plant`), as the in-process world is.
+    Not thread-safe: the loop's thread only (as the driver)."""
 
     def __init__(self, model, params, control_rate: float):
         self.layout = StateLayout(len(model.joint_names))
         self._record = np.zeros(self.layout.size)
-        self._command = np.zeros(1 + len(model.joint_names))
+        self._command_record = np.zeros(1 + len(model.joint_names))
         self._fault_text = "the simulated base failed"
         self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         cmd_r, self._cmd_w = os.pipe()
@@ -177,7 +169,7 @@ class PhysicsLink:
         os.set_blocking(self._state_r, False)
         # the model as its flat keys (it holds modules: not picklable); the
         # physics process builds it again, as SimDriver does for its body
-        _send(self._sock, (dict(model.params), dict(params), float(control_rate)))
+        send(self._sock, (dict(model.params), dict(params), float(control_rate)))
         #: what the physics' driver learnt configuring (hidden_truth, friction, ...)
         self.info = self._await_ready()
 
@@ -210,10 +202,9 @@ class PhysicsLink:
             left = deadline - time.monotonic()
             if left <= 0.0 or not select.select([self._sock], [], [], left)[0]:
                 return None
-            data = self._sock.recv(MAX_MESSAGE)
-            if not data:
+            message = receive(self._sock)
+            if message is None:
                 return None
-            message = pickle.loads(data)
             if message[0] == "fault":
                 self._fault_text = message[1]
             else:
@@ -240,23 +231,24 @@ class PhysicsLink:
         self._record[:] = np.frombuffer(data, dtype=np.float64)
         return True
 
-    def latest(self) -> JointReading:
+    def read(self) -> JointReading:
         """The newest state as a reading (stamp: sim time [s]); the last one
-        again when the physics has not stepped since."""
+        again when the physics has not stepped since. The physics process
+        applied the encoders' zero errors and the tip-over check."""
         self._drain()
         r, lay = self._record, self.layout
         if r[_FLAGS]:
             while True:          # the fault text was sent before the record
                 try:
-                    data = self._sock.recv(MAX_MESSAGE, socket.MSG_DONTWAIT)
+                    message = receive(self._sock, wait=False)
                 except BlockingIOError:
                     break
-                message = pickle.loads(data) if data else None
                 if message is None:
                     break
                 if message[0] == "fault":
                     self._fault_text = message[1]
             raise DriverCommunicationError(self._fault_text, "pybullet")
+        # the reading's stamp: the sim time [s] of the newest state
         return JointReading(float(r[_STAMP]), r[lay.positions()].copy(),
                             r[lay.velocities()].copy(), r[lay.efforts()].copy())
 
@@ -277,12 +269,33 @@ class PhysicsLink:
         return GroundTruth(float(r[_STAMP]), r[lay.truth_pose()].copy(),
                            r[lay.truth_twist()].copy())
 
-    def command(self, mode: float, values=None) -> None:
+    def release(self) -> None:
+        """Brakes released, every joint commanded to rest (activate)."""
+        self._command(VELOCITY)
+
+    def hold(self) -> None:
+        """Brakes on: the joints held still (deactivate)."""
+        self._command(HOLD)
+
+    def command_velocities(self, velocities: np.ndarray) -> None:
+        """Joint speeds [rad/s], one per joint."""
+        self._command(VELOCITY, velocities)
+
+    def command_efforts(self, efforts: np.ndarray) -> None:
+        """Joint torques [N m], one per joint."""
+        self._command(EFFORT, efforts)
+
+    def status(self) -> dict[str, str]:
+        """The physics process's line of the driver's status."""
+        return {"physics_process": f"pid {self.pid}, {self.info['scheduling']}, "
+                                   f"{self.lost_periods} periods lost"}
+
+    def _command(self, mode: float, values=None) -> None:
         """Send a command: HOLD, or VELOCITY / EFFORT with one value per
         joint. A full pipe (the physics stalled) drops it: the next one
         carries the whole command again. A dead physics process is reported
         by the next read, not here (deactivate must not fail)."""
-        c = self._command
+        c = self._command_record
         c[0] = mode
         c[1:] = 0.0 if values is None else values
         try:
@@ -294,7 +307,7 @@ class PhysicsLink:
         """The physics' wheel contacts (see SimDriver.wheel_contacts); a round
         trip of up to one control period, not for the cycle; None when the
         physics does not answer within REQUEST_TIMEOUT."""
-        if not _send(self._sock, ("contacts",)):
+        if not send(self._sock, ("contacts",)):
             return None
         message = self._receive(time.monotonic() + REQUEST_TIMEOUT)
         return message[1] if message is not None and message[0] == "contacts" else None
@@ -367,7 +380,10 @@ def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
     from holonomic_core.realtime import set_fifo, set_normal
     from holonomic_sim.sim_driver import SimDriver
 
-    flat, params, rate = pickle.loads(sock.recv(MAX_MESSAGE))
+    setup = receive(sock)
+    if setup is None:               # the loop went before sending the set-up
+        return 0
+    flat, params, rate = setup
     params["sim.physics_process"] = False
     priority = plant_priority(params)
     # started by the loop process, which asked for its scheduling before
@@ -382,14 +398,14 @@ def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
     try:
         driver.configure()
     except ConfigError as exc:      # the loop raises the same (bad sim.* values)
-        _send(sock, ("config_error", (exc.key, exc.value, exc.allowed)))
+        send(sock, ("config_error", (exc.key, exc.value, exc.allowed)))
         return 2
     except DriverError as exc:
-        _send(sock, ("error", str(exc)))
+        send(sock, ("error", str(exc)))
         return 2
-    _send(sock, ("ready", {"hidden_truth": driver.hidden_truth,
-                           "wheel_radii": driver.wheel_radii,
-                           "friction": driver.friction, "scheduling": scheduling}))
+    send(sock, ("ready", {"hidden_truth": driver.hidden_truth,
+                          "wheel_radii": driver.wheel_radii,
+                          "friction": driver.friction, "scheduling": scheduling}))
     layout = StateLayout(len(model.joint_names))
     record = np.zeros(layout.size)
     width = 8 * (1 + layout.joints)
@@ -403,11 +419,11 @@ def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
     try:
         while True:
             try:                           # requests; end-of-file: the loop is gone
-                data = sock.recv(MAX_MESSAGE)
-                if not data:
+                message = receive(sock)
+                if message is None:
                     return 0
-                if pickle.loads(data)[0] == "contacts":
-                    _send(sock, ("contacts", driver.wheel_contacts()))
+                if message[0] == "contacts":
+                    send(sock, ("contacts", driver.wheel_contacts()))
             except BlockingIOError:
                 pass
             data = _read_newest(cmd_fd, width)
@@ -437,7 +453,7 @@ def serve(sock: socket.socket, cmd_fd: int, state_fd: int) -> int:
                     fault = True
                     if str(exc) != last_fault:
                         last_fault = str(exc)
-                        _send(sock, ("fault", last_fault))
+                        send(sock, ("fault", last_fault))
             if periods:
                 stepped_to += periods * period
                 _write_state(driver, state_fd, record, layout, reading, fault)

@@ -43,20 +43,131 @@ then returns the newest state without stepping (the plant no longer runs
 inside the control cycle, as on a real robot) and the run is no longer
 lock-step: a loop that calls faster than real time sees the same reading
 again.
+
+The driver talks to either through one interface, its *plant*
+(:class:`Plant`): :class:`InProcessPlant` (the world in this process) or the
+physics process's :class:`~holonomic_sim.physics_process.PhysicsLink`,
+chosen once in ``configure``.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
 import numpy as np
 
 from holonomic_core.driver import Driver, DriverCommunicationError, GroundTruth, JointReading
 from holonomic_core.schema import ConfigError, ParamSpec
-from holonomic_sim.physics_process import EFFORT, HOLD, VELOCITY, PhysicsLink
+from holonomic_sim.physics_process import PhysicsLink
 
 #: a base tilted more than this has tipped over: stop reporting a valid state
 _TIP_OVER = math.radians(30.0)
+
+
+class Plant(Protocol):
+    """What :class:`SimDriver` drives: the simulated robot, in this process
+    (:class:`InProcessPlant`) or in the physics process
+    (:class:`~holonomic_sim.physics_process.PhysicsLink`). Joint vectors
+    are in the model's joint order."""
+
+    #: the physics process's PID; None in this process
+    pid: int | None
+
+    def release(self) -> None:
+        """Brakes released, every joint commanded to rest (activate)."""
+
+    def hold(self) -> None:
+        """Brakes on: the joints held still (deactivate)."""
+
+    def command_velocities(self, velocities: np.ndarray) -> None:
+        """Joint speeds [rad/s]."""
+
+    def command_efforts(self, efforts: np.ndarray) -> None:
+        """Joint torques [N m]."""
+
+    def read(self) -> JointReading:
+        """The joints as the drives' encoders report them, stamped with the
+        sim time [s]; raises DriverCommunicationError when the base tipped
+        over or the physics process ended."""
+
+    @property
+    def sim_time(self) -> float:
+        """Sim time [s] of the latest state."""
+
+    def ground_truth(self) -> GroundTruth:
+        """base_link's true pose in odom and twist, at :attr:`sim_time`."""
+
+    def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Floor contact points and planar friction forces in base_link [m], [N]."""
+
+    def status(self) -> dict[str, str]:
+        """Extra lines for the driver's status."""
+
+    def close(self) -> None:
+        """Release the world (or end the physics process)."""
+
+
+class InProcessPlant:
+    """The simulated robot in a world of this process: :meth:`read` steps
+    the world by ``steps`` physics steps (one control period; 0 in a shared
+    world, which its owner steps for every robot), then reports the joints
+    with the encoders' zero errors ``reading_offset`` [rad] added."""
+
+    pid = None
+
+    def __init__(self, world, robot, steps: int, reading_offset: np.ndarray,
+                 owns_world: bool):
+        #: the pybullet world (holonomic_sim.world.SimWorld) and this robot in it
+        self.world, self.robot = world, robot
+        self._steps = steps
+        self._reading_offset = reading_offset
+        self._owns_world = owns_world
+
+    def release(self) -> None:
+        self.robot.command_velocities(np.zeros(len(self._reading_offset)))
+
+    def hold(self) -> None:
+        self.robot.hold()
+
+    def command_velocities(self, velocities: np.ndarray) -> None:
+        self.robot.command_velocities(velocities)
+
+    def command_efforts(self, efforts: np.ndarray) -> None:
+        self.robot.command_efforts(efforts)
+
+    def read(self) -> JointReading:
+        if self._steps:
+            self.world.step(self._steps)
+        if self.robot.tilt() > _TIP_OVER:
+            raise DriverCommunicationError(
+                f"the simulated base tipped over ({math.degrees(self.robot.tilt()):.0f} deg)",
+                "pybullet")
+        positions, velocities, efforts = self.robot.joint_states()
+        # the encoders report the angle plus their zero's error and the
+        # configured offset, which the controller subtracts again
+        positions = positions + self._reading_offset
+        # the reading's stamp: the sim time [s] after this period's steps
+        return JointReading(self.world.time, positions, velocities, efforts)
+
+    @property
+    def sim_time(self) -> float:
+        return self.world.time
+
+    def ground_truth(self) -> GroundTruth:
+        return GroundTruth(self.world.time, self.robot.pose(), self.robot.body_twist())
+
+    def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.robot.wheel_contacts()
+
+    def status(self) -> dict[str, str]:
+        return {}
+
+    def close(self) -> None:
+        if self._owns_world:
+            self.world.close()
+        else:               # a shared world goes on for the other robots
+            self.robot.hold()
 
 
 class SimDriver(Driver):
@@ -77,16 +188,12 @@ class SimDriver(Driver):
                               f"an integer multiple of control_rate ({self.control_rate:g} Hz)")
         self.substeps = int(round(ratio))
         self.physics_rate = rate
-        self._world = None
-        self._robot = None
+        self._plant: Plant | None = None
         #: simulated wheel radii [m] when sim.wheel_radius_spread > 0
         self.wheel_radii: list[float] | None = None
         #: the simulated geometry where it differs from the config: flat
         #: config keys -> true values (what a perfect calibration writes)
         self.hidden_truth: dict[str, float] = {}
-        self._reading_offset = np.zeros(len(model.joint_names))
-        #: the physics process's link (sim.physics_process), else None
-        self._link = None
         if params.get("sim.physics_process") and world is not None:
             raise ConfigError("sim.physics_process", True,
                               "false in a shared world (--fleet steps one world for all robots)")
@@ -156,8 +263,9 @@ class SimDriver(Driver):
 
         p = self.params
         if p.get("sim.physics_process"):
-            self._link = PhysicsLink(self.model, p, self.control_rate)
-            info = self._link.info
+            link = PhysicsLink(self.model, p, self.control_rate)
+            self._plant = link
+            info = link.info
             self.hidden_truth = info["hidden_truth"]
             self.wheel_radii = info["wheel_radii"]
             self.friction = info["friction"]
@@ -173,27 +281,31 @@ class SimDriver(Driver):
         # the physical robot's encoders read (angle - its configured
         # correction) + the zero error; a controller with the same config
         # adds the correction back and sees angle + error
-        self._reading_offset = self._encoder_zeros(rng) - self.model.zero_corrections
+        reading_offset = self._encoder_zeros(rng) - self.model.zero_corrections
         drive = None if p["sim.ideal_motors"] else drive_spec(self.model, p)
         # the drives' spread has its own stream: adding it left the friction
         # and radius draws of a seed unchanged
         drive_rng = np.random.default_rng([p["sim.seed"], 1])
+        shared = self._shared_world
+        world = None
         try:
-            if self._shared_world is not None:
-                if abs(self._shared_world.dt * self.physics_rate - 1.0) > 1e-9:
+            if shared is not None:
+                if abs(shared.dt * self.physics_rate - 1.0) > 1e-9:
                     raise ConfigError("sim.physics_rate", self.physics_rate,
-                                      f"the shared world's rate ({1 / self._shared_world.dt:g} Hz)")
-                self._world = self._shared_world
+                                      f"the shared world's rate ({1 / shared.dt:g} Hz)")
+                world = shared
             else:
-                self._world = SimWorld(self.physics_rate, gui=p["sim.gui"])
-            self._robot = self._world.add_robot(body_model, Pose2D(*start), friction, drive,
-                                                drive_rng, lifted=p["sim.lifted"])
+                world = SimWorld(self.physics_rate, gui=p["sim.gui"])
+            robot = world.add_robot(body_model, Pose2D(*start), friction, drive,
+                                    drive_rng, lifted=p["sim.lifted"])
         except SimError as exc:
-            if self._world is not None and self._shared_world is None:
-                self._world.close()
+            if world is not None and shared is None:
+                world.close()
             raise DriverCommunicationError(str(exc), "pybullet") from exc
-        if self._shared_world is None:
-            self._world.settle()      # odom = where base_link rests once settled
+        if shared is None:
+            world.settle()      # odom = where base_link rests once settled
+        self._plant = InProcessPlant(world, robot, 0 if shared is not None else self.substeps,
+                                     reading_offset, owns_world=shared is None)
         self.friction = friction
 
     def _body_model(self, rng: np.random.Generator):
@@ -260,85 +372,53 @@ class SimDriver(Driver):
         return zeros
 
     def _on_activate(self) -> None:
-        if self._link is not None:
-            self._link.command(VELOCITY)
-            return
-        self._robot.command_velocities(np.zeros(len(self.model.joint_names)))
+        self._plant.release()
 
     def _on_deactivate(self) -> None:
-        if self._link is not None:
-            self._link.command(HOLD)
-            return
-        self._robot.hold()
+        self._plant.hold()
 
     def _on_close(self) -> None:
-        if self._link is not None:
-            self._link.close()
-            self._link = None
-        if self._world is not None:
-            if self._shared_world is None:
-                self._world.close()
-            else:
-                self._robot.hold()
-            self._world = None
+        if self._plant is not None:         # None: configure failed
+            self._plant.close()
+            self._plant = None
 
     # -- I/O ----------------------------------------------------------------------
     def _on_read(self) -> JointReading:
-        if self._link is not None:
-            # the physics process applied the zero errors and the tip-over check
-            return self._link.latest()
-        if self._shared_world is None:
-            self._world.step(self.substeps)
-        if self._robot.tilt() > _TIP_OVER:
-            raise DriverCommunicationError(
-                f"the simulated base tipped over ({math.degrees(self._robot.tilt()):.0f} deg)",
-                "pybullet")
-        positions, velocities, efforts = self._robot.joint_states()
-        # the encoders report the angle plus their zero's error and the
-        # configured offset, which the controller subtracts again
-        positions = positions + self._reading_offset
-        return JointReading(self._world.time, positions, velocities, efforts)
+        # the reading and its stamp: InProcessPlant.read / PhysicsLink.read
+        return self._plant.read()
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
-        if self._link is not None:
-            self._link.command(VELOCITY, velocities)
-            return
-        self._robot.command_velocities(velocities)
+        self._plant.command_velocities(velocities)
 
     def _on_write_efforts(self, efforts: np.ndarray) -> None:
-        if self._link is not None:
-            self._link.command(EFFORT, efforts)
-            return
-        self._robot.command_efforts(efforts)
+        self._plant.command_efforts(efforts)
 
     # -- capabilities -------------------------------------------------------------
     @property
+    def plant(self) -> Plant | None:
+        """The simulated robot this driver drives (:class:`InProcessPlant`,
+        or the physics process's link with sim.physics_process); None
+        before configure and after close. For tests and tools that reach
+        into the simulation (the in-process plant's ``world`` and ``robot``)."""
+        return self._plant
+
+    @property
     def physics_pid(self) -> int | None:
         """The physics process's PID (sim.physics_process), else None."""
-        return self._link.pid if self._link is not None else None
+        return None if self._plant is None else self._plant.pid
 
     def sim_time(self) -> float | None:
-        if self._link is not None:
-            return self._link.sim_time
-        return self._world.time if self._world is not None else None
+        return None if self._plant is None else self._plant.sim_time
 
     def ground_truth(self) -> GroundTruth | None:
-        if self._link is not None:
-            return self._link.ground_truth()
-        if self._robot is None:
-            return None
-        return GroundTruth(self._world.time, self._robot.pose(), self._robot.body_twist())
+        return None if self._plant is None else self._plant.ground_truth()
 
     def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The floor's contact points on the robot and their planar friction
         forces, in base_link ([m], [N]; n x 2 each); simulation only. With
         sim.physics_process a round trip to the physics process (None if it
         does not answer)."""
-        if self._link is not None:
-            return self._link.wheel_contacts()
-        if self._robot is None:
-            return None
-        return self._robot.wheel_contacts()
+        return None if self._plant is None else self._plant.wheel_contacts()
 
     def status(self) -> dict[str, str]:
         values = super().status()
@@ -347,13 +427,10 @@ class SimDriver(Driver):
                        "motors": "ideal" if self.params["sim.ideal_motors"] else "drive model"})
         if self.wheel_radii:
             values["simulated_wheel_radii"] = " ".join(f"{r:.5f}" for r in self.wheel_radii)
-        if self._world is not None or self._link is not None:
+        if self._plant is not None:
             values["sim_time_s"] = f"{self.sim_time():.3f}"
             values["wheel_friction"] = " ".join(f"{mu:.3f}" for mu in self.friction)
-        if self._link is not None:
-            values["physics_process"] = (f"pid {self._link.pid}, "
-                                         f"{self._link.info['scheduling']}, "
-                                         f"{self._link.lost_periods} periods lost")
+            values.update(self._plant.status())
         return values
 
 

@@ -70,10 +70,10 @@ def test_simulated_contact_points_are_where_the_kinematics_put_them(robot):
     kin = cfg.model.kinematics
     rng = np.random.default_rng(11)
     with SimDriver(cfg.model, cfg.values, 200.0) as driver:
-        body, cid = driver._robot.body, driver._world.client
+        body, cid = driver.plant.robot.body, driver.plant.world.client
         q = np.zeros(len(cfg.model.joint_names))
         q[0::2] = rng.uniform(-math.pi, math.pi, len(kin.casters))
-        for idx, angle in zip(driver._robot.joint_indices[0::2], q[0::2]):
+        for idx, angle in zip(driver.plant.robot.joint_indices[0::2], q[0::2]):
             pb.resetJointState(body, idx, angle, physicsClientId=cid)
         for _ in range(20):
             reading = driver.read()
@@ -81,7 +81,7 @@ def test_simulated_contact_points_are_where_the_kinematics_put_them(robot):
         expected = kin.contact_points(reading.positions)
         pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
         inv_pos, inv_orn = pb.invertTransform(pos, orn)
-        for i, idx in enumerate(driver._robot.joint_indices[1::2]):
+        for i, idx in enumerate(driver.plant.robot.joint_indices[1::2]):
             contacts = pb.getContactPoints(bodyA=body, linkIndexA=idx, physicsClientId=cid)
             assert contacts, f"wheel {kin.casters[i].name} does not touch the floor"
             world = np.mean([c[5] for c in contacts], axis=0)
@@ -89,7 +89,7 @@ def test_simulated_contact_points_are_where_the_kinematics_put_them(robot):
             assert local[:2] == pytest.approx(expected[i], abs=2e-3)
         # the chassis rests level on its wheels alone
         assert abs(driver.ground_truth().pose[2]) < 1e-3
-        assert driver._robot.tilt() < 0.01
+        assert driver.plant.robot.tilt() < 0.01
 
 
 @pytest.mark.parametrize("robot", ["xr4000", "comr3"])

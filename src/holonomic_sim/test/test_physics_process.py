@@ -228,3 +228,18 @@ def test_simulated_can_drives_refuse_a_physics_process():
                                "sim.physics_process": True})
     with pytest.raises(ConfigError, match="sim.physics_process"):
         cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate)
+
+
+def test_both_plants_offer_every_member_of_the_plant_interface():
+    """SimDriver drives its plant without asking which it is: the world in
+    this process and the physics process's link must each have every member
+    of the Plant protocol (a method added to one only would fail there at
+    run time, in the configuration the tests run less)."""
+    from holonomic_sim.physics_process import PhysicsLink
+    from holonomic_sim.sim_driver import InProcessPlant, Plant
+
+    members = {n for n in vars(Plant) if not n.startswith("_")} | set(Plant.__annotations__)
+    assert {"pid", "release", "hold", "command_velocities", "command_efforts", "read",
+            "sim_time", "ground_truth", "wheel_contacts", "status", "close"} == members
+    for cls in (InProcessPlant, PhysicsLink):
+        assert sorted(n for n in members if not hasattr(cls, n)) == [], cls.__name__

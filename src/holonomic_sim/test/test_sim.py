@@ -143,9 +143,9 @@ def test_a_tipped_over_base_is_a_driver_error():
     cfg, driver = make_driver()
     with driver:
         import pybullet as pb
-        robot = driver._robot
+        robot = driver.plant.robot
         pb.resetBasePositionAndOrientation(
             robot.body, [0, 0, 0.5], pb.getQuaternionFromEuler([math.pi / 2, 0, 0]),
-            physicsClientId=driver._world.client)
+            physicsClientId=driver.plant.world.client)
         with pytest.raises(DriverCommunicationError, match="tipped over"):
             driver.read()

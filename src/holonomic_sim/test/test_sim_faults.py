@@ -91,13 +91,13 @@ def assert_stopped_then_recovers(rig, what):
 
 def test_a_base_pinned_in_place_saturates_the_motors_and_faults(rig):
     rig.run((0.5, 0.0, 0.0), 1.0)
-    cid, body = rig.driver._world.client, rig.driver._robot.body
+    cid, body = rig.driver.plant.world.client, rig.driver.plant.robot.body
     pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
     pin = pb.createConstraint(body, -1, -1, -1, pb.JOINT_FIXED, [0, 0, 0], [0, 0, 0], pos,
                               childFrameOrientation=orn, physicsClientId=cid)
     pb.changeConstraint(pin, maxForce=1e6, physicsClientId=cid)
     # wheels that grip (a pinned base with ordinary grip just spins them)
-    wheels = rig.driver._robot.joint_indices[:2]
+    wheels = rig.driver.plant.robot.joint_indices[:2]
     for link in wheels:
         pb.changeDynamics(body, link, lateralFriction=50.0, physicsClientId=cid)
     rig.run((0.5, 0.0, 0.0), 1.5)          # > tracking_timeout (0.5 s)

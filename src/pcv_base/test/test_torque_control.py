@@ -70,7 +70,7 @@ def load_model_of(robot):
 def measured_acceleration(driver, torques, steps=5):
     """Apply joint torques for ``steps`` physics steps; the body-frame
     derivative of the true body twist [m/s^2, m/s^2, rad/s^2]."""
-    robot, world = driver._robot, driver._world
+    robot, world = driver.plant.robot, driver.plant.world
     before = robot.body_twist()
     robot.command_efforts(torques)
     world.step(steps)
@@ -86,7 +86,7 @@ def test_model_predicts_the_simulated_acceleration(xr4000_sim):
             ctrl.set_command((0.3, 0.1, 0.4))
             ctrl.step()
         q = ctrl.reading.positions.copy()
-        twist = driver._robot.body_twist()
+        twist = driver.plant.robot.body_twist()
         wrench = rng.normal(0, 1, 3) * np.array([25.0, 25.0, 5.0])
         torques = dyn.torque_distribution(q, wrench)            # F = C^T Gamma'
         predicted = dyn.acceleration(q, twist, wrench)           # Lambda^-1 (F - mu)
@@ -94,7 +94,7 @@ def test_model_predicts_the_simulated_acceleration(xr4000_sim):
         # pybullet's contacts are compliant and slip a little: 3 % of the
         # acceleration scale, not of each component
         assert np.abs(measured - predicted).max() < 0.03 * np.abs(predicted).max() + 0.01
-        driver._robot.command_velocities(ctrl.joint_command)
+        driver.plant.robot.command_velocities(ctrl.joint_command)
 
 
 def test_unit_control_force_gives_the_commanded_acceleration(xr4000_sim):
@@ -106,11 +106,11 @@ def test_unit_control_force_gives_the_commanded_acceleration(xr4000_sim):
             ctrl.set_command((0.3, 0.1, 0.4))
             ctrl.step()
         q = ctrl.reading.positions.copy()
-        twist = driver._robot.body_twist()
+        twist = driver.plant.robot.body_twist()
         wrench = dyn.mass_matrix(q) @ f_star + dyn.bias(q, twist)
         measured = measured_acceleration(driver, dyn.torque_distribution(q, wrench))
         assert measured == pytest.approx(f_star, abs=0.05), (f_star, measured)
-        driver._robot.command_velocities(ctrl.joint_command)
+        driver.plant.robot.command_velocities(ctrl.joint_command)
 
 
 def torque_robot(**overrides):
