@@ -437,8 +437,7 @@ def _percentiles(values_ms) -> dict:
             "mean_ms": float(values.mean())}
 
 
-def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr",
-                    publish_rate: float = 1000.0) -> dict:
+def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr") -> dict:
     """TwistStamped from another process -> the control cycle that uses it
     (a 1 kHz base controller node in this process, its loop in its own
     process, mock driver), against the DDS one-way latency of the same
@@ -466,7 +465,8 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr",
     topic = f"/{ns}/cmd_vel"
     params = [Parameter("robot_config", value=robot), Parameter("driver", value="mock"),
               Parameter("control_rate", value=1000.0),
-              Parameter("publish_rate", value=publish_rate),
+              # a state record every cycle: the hook sees the first cycle using each command
+              Parameter("publish_rate", value=1000.0),
               Parameter("cmd_vel_stamped", value=True),
               Parameter("enable_on_start", value=True), Parameter("cmd_timeout", value=0.0)]
     for axis in ("linear.x", "linear.y", "angular.z"):
