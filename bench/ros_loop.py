@@ -425,8 +425,8 @@ LATENCY_STAGES = (
     ("dds", "DDS's write -> its arrival in the node's process (Fast DDS's reception stamp)"),
     ("dispatch", "arrival -> the node's cmd_vel callback starts (the executor wakes, takes "
                  "and converts the message)"),
-    ("callback", "the callback starts -> the command is in the loop's command pipe"),
-    ("wait", "in the pipe -> the loop's next cycle takes it (after its reading, immediately "
+    ("callback", "the callback starts -> it writes the command into the loop's command pipe"),
+    ("wait", "the write -> the loop's next cycle takes it (after its reading, immediately "
              "before the control law)"),
 )
 
@@ -437,7 +437,8 @@ def _percentiles(values_ms) -> dict:
             "mean_ms": float(values.mean())}
 
 
-def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr") -> dict:
+def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr",
+                    node_publishes: bool = True) -> dict:
     """TwistStamped from another process -> the control cycle that uses it
     (a 1 kHz base controller node in this process, its loop in its own
     process, mock driver), against the DDS one-way latency of the same
@@ -448,18 +449,20 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
     step of the system clock changes): its stamp, DDS's write and reception
     timestamps (the message info of the node's own subscription, whose
     callback this function wraps through rclpy's public
-    ``Subscription.callback``), the callback's start, the end of the write
+    ``Subscription.callback``), the callback's start, the start of the write
     into the loop's command pipe (``link.send_command`` wrapped), and the
     moment the loop took it (``command_taken`` of the first state record
     whose commanded twist is the message's, through the node's public
     state-record hook ``node.link.on_record``). The end-to-end time is stamp
     -> taken: the control law uses the command right after; the cycle's
-    reading precedes that by ``reading_to_take``."""
+    reading precedes that by ``reading_to_take``. ``node_publishes`` False:
+    the node does not publish the records (odom, /tf, joint_states): an A/B
+    of how much its 1 kHz publishing delays the command's callback."""
     import rclpy
     from geometry_msgs.msg import TwistStamped
     from rclpy.parameter import Parameter
 
-    from holonomic_bringup.base_controller_node import BaseControllerNode
+    from holonomic_bringup.base_controller_node import BaseControllerNode, switch_interval
 
     ns = "bench_latency"
     topic = f"/{ns}/cmd_vel"
@@ -476,10 +479,14 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
                    Parameter(f"limits.{axis}.max_deceleration", value=1000.0)]
     node = BaseControllerNode(namespace=ns, parameter_overrides=params)
     period = 1.0 / node.config.controller.control_rate
+    # as holonomic-bringup runs the node (run_robots): with Python's default
+    # 5 ms, the callback waits up to 5 ms for the lock the reader thread holds
+    switch_before = sys.getswitchinterval()
+    sys.setswitchinterval(switch_interval(node.config.controller.control_rate))
     gc.freeze()
     wall_minus_mono = time.time() - time.monotonic()
     traced: dict[float, list] = {}      # vx -> [stamp, dds write, dds arrival, callback]
-    written: dict[float, float] = {}    # vx -> end of the pipe write
+    written: dict[float, float] = {}    # vx -> start of the pipe write
     cycles: dict[float, tuple] = {}     # vx -> (reading, taken) of the first cycle using it
     link = node.link
     publish = link.on_record
@@ -489,11 +496,14 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
         vx = round(float(record.twist_command[0]), 9)
         if vx and vx not in cycles:
             cycles[vx] = (record.stamp, record.command_taken)
-        publish(record)
+        if node_publishes:
+            publish(record)
 
     def send_command(twist, received):
-        send(twist, received)
+        # stamped before the write: after it, this thread may wait for the
+        # interpreter lock while the loop already has the command
         written[round(twist[0], 9)] = time.monotonic()
+        send(twist, received)
 
     subscription = next(s for s in node.subscriptions if s.topic_name == topic)
     callback = subscription.callback
@@ -525,6 +535,7 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
         finish()
         node.shutdown()
         node.destroy_node()
+        sys.setswitchinterval(switch_before)
     step_ms = abs(time.time() - time.monotonic() - wall_minus_mono) * 1e3
     arrived = {}
     for line in out.splitlines():
@@ -538,6 +549,7 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
     dds = np.array([arrived[vx] for vx in both])
     reading_to_take = np.array([cycles[vx][1] - cycles[vx][0] for vx in both]) * 1e3
     e2e_p50, dds_p50 = float(np.percentile(e2e, 50)), float(np.percentile(dds, 50))
+    node_rx_p50 = float(np.percentile((times[:, 3] - times[:, 0]) * 1e3, 50))
     # the design's floor: the command cannot be used before the next cycle,
     # on average half a period after it arrives (fixed-period sampling of a
     # message stream with no phase relation to the loop)
@@ -547,9 +559,11 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
             "e2e_p50_ms": e2e_p50, "e2e_p99_ms": float(np.percentile(e2e, 99)),
             "ratio_p50": e2e_p50 / dds_p50,
             "stages": stages, "reading_to_take": _percentiles(reading_to_take),
-            "node_rx_p50_ms": float(np.percentile((times[:, 3] - times[:, 0]) * 1e3, 50)),
+            # DDS one-way into the node itself (stamp -> its callback starts)
+            "node_rx_p50_ms": node_rx_p50, "ratio_to_node_rx_p50": e2e_p50 / node_rx_p50,
             "period_ms": period * 1e3, "floor_p50_ms": floor_p50,
-            "floor_ratio": floor_p50 / dds_p50, "clock_step_ms": step_ms}
+            "floor_ratio": floor_p50 / dds_p50, "clock_step_ms": step_ms,
+            "node_publishes": node_publishes}
 
 
 def latency_lines(r: dict) -> list[str]:
@@ -557,7 +571,8 @@ def latency_lines(r: dict) -> list[str]:
     lines = [f"{r['matched']} of {r['commands']} commands; end to end p50 "
              f"{r['e2e_p50_ms']:.3f} ms, p99 {r['e2e_p99_ms']:.3f} ms; DDS one-way to a plain "
              f"subscriber p50 {r['dds_p50_ms']:.3f} ms, p99 {r['dds_p99_ms']:.3f} ms: "
-             f"{r['ratio_p50']:.2f}x"]
+             f"{r['ratio_p50']:.2f}x; to the node's own callback (DDS one-way into the node) "
+             f"p50 {r['node_rx_p50_ms']:.3f} ms: {r['ratio_to_node_rx_p50']:.2f}x"]
     for name, what in LATENCY_STAGES:
         st = r["stages"][name]
         lines.append(f"{name:9s} p50 {st['p50_ms']:.3f}  p99 {st['p99_ms']:.3f}  mean "
@@ -652,11 +667,11 @@ def _ab_line(r: dict) -> str:
 
 
 _USAGE = ("usage: python bench/ros_loop.py slice-ab [SECONDS [REPS]]\n"
-          "       python bench/ros_loop.py latency [COMMANDS [REPS]]")
+          "       python bench/ros_loop.py latency [COMMANDS [REPS [publish-ab]]]")
 
 
 if __name__ == "__main__":
-    # python bench/ros_loop.py slice-ab [SECONDS [REPS]] | latency [COMMANDS [REPS]]
+    # python bench/ros_loop.py slice-ab [SECONDS [REPS]] | latency [COMMANDS [REPS [publish-ab]]]
     if len(sys.argv) < 2 or sys.argv[1] not in ("slice-ab", "latency"):
         sys.exit(_USAGE)
     try:
@@ -672,10 +687,14 @@ if __name__ == "__main__":
         if sys.argv[1] == "slice-ab":
             slice_ab(numbers[0] or 25.0, numbers[1] or 3)
         else:
+            # with "publish-ab": alternately with and without the node's 1 kHz publishing
+            variants = (True, False) if "publish-ab" in sys.argv[4:] else (True,)
             for rep in range(numbers[1] or 1):
-                result = command_latency(int(numbers[0] or 3000))
-                print(f"run {rep + 1}, load {os.getloadavg()[0]:.1f}:", flush=True)
-                for line in latency_lines(result):
-                    print("  " + line, flush=True)
+                for publishes in variants:
+                    result = command_latency(int(numbers[0] or 3000), node_publishes=publishes)
+                    print(f"run {rep + 1}, node {'publishing' if publishes else 'silent'}, "
+                          f"load {os.getloadavg()[0]:.1f}:", flush=True)
+                    for line in latency_lines(result):
+                        print("  " + line, flush=True)
     finally:
         rclpy.try_shutdown()
