@@ -55,9 +55,9 @@ class RecordLayout:
 
     def __post_init__(self):
         n, k = self.joints, self.units
-        fields = [("flags", 1), ("cycle", 1), ("stamp", 1), ("command_taken", 1), ("pose", 3), ("pose_cov", 9),
-                  ("twist", 3), ("twist_cov", 9), ("twist_command", 3), ("positions", n),
-                  ("velocities", n), ("efforts", n), ("residual", k), ("state", 1),
+        fields = [("flags", 1), ("cycle", 1), ("stamp", 1), ("command_taken", 1), ("pose", 3),
+                  ("pose_cov", 9), ("twist", 3), ("twist_cov", 9), ("twist_command", 3),
+                  ("positions", n), ("velocities", n), ("efforts", n), ("residual", k), ("state", 1),
                   ("stale", 1), ("saturation", 1), ("truth_valid", 1), ("truth_pose", 3),
                   ("truth_twist", 3)]
         offset = 0
