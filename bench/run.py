@@ -70,10 +70,11 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
     parser.add_argument("--render", type=Path, metavar="JSON",
                         help="only rewrite the page from a previous run's results")
-    parser.add_argument("--only", choices=("sim", "compute", "loop"),
+    parser.add_argument("--only", choices=("sim", "compute", "loop", "latency"),
                         help="re-run only the simulation-speed rows (ideal motors and drive "
-                             "model), the control-cycle compute rows, or the 1 kHz loop and "
-                             "command latency rows; the page keeps the last run's others")
+                             "model), the control-cycle compute rows, the 1 kHz loop and "
+                             "command latency rows, or the command latency alone; the page "
+                             "keeps the last run's others")
     args = parser.parse_args(argv)
     if args.only:
         saved = json.loads(args.out.with_suffix(".json").read_text())
@@ -83,6 +84,8 @@ def main(argv=None) -> int:
             saved["results"]["sim_drive"] = sim_drive_rows(_step, args.quick)
         elif args.only == "compute":
             saved["results"]["compute"] = compute_rows(_step, args.quick)
+        elif args.only == "latency":
+            saved["results"]["latency"] = latency_row(_step, args.quick)
         else:
             saved["results"].update(loop_rows(_step, args.quick))
         saved.setdefault("reruns", {})[args.only] = (
@@ -156,6 +159,18 @@ def loop_rows(step, quick: bool, init: bool = True) -> dict:
     finally:
         if init:
             rclpy.try_shutdown()
+
+
+def latency_row(step, quick: bool) -> dict:
+    """The command latency alone (``--only latency``)."""
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "97")
+    import rclpy
+    rclpy.init()
+    try:
+        return step("command latency", ros_loop.command_latency, 1000 if quick else 5000)
+    finally:
+        rclpy.try_shutdown()
 
 
 def sim_rows(step, quick: bool) -> list[dict]:
@@ -405,7 +420,10 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   clock, for the simulator simulated time, so only the mock's say anything) and between their
   arrivals here (DDS and this subscriber included). A received rate below 1000/s means the
   node or this subscriber did not keep up with three 1 kHz topics.
-- **Command latency** (`python bench/ros_loop.py latency 3000 3` repeats it alone): a base
+- **Command latency** (`python bench/run.py --only latency` re-runs this row and its
+  stages on the page; `python bench/ros_loop.py latency 3000 3` repeats it three times and
+  only prints; `... latency 3000 3 publish-ab` alternates with a node that does not
+  publish its 1 kHz topics): a base
   controller node (1 kHz, mock driver, `cmd_vel_stamped`, acceleration limits out of the
   way, its loop in its own process, publishing its three 1 kHz topics) in this process; a
   publisher process sends 5000 `TwistStamped` at 200 Hz, each at a random moment of its
