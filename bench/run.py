@@ -92,7 +92,7 @@ def main(argv=None) -> int:
             datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
             + f" on: {machine()}")
         table = format_table(saved["results"])
-        print(table + "\n\n" + latency_block(saved["results"]))
+        print(table + "\n" + latency_block(saved["results"]))
         args.out.with_suffix(".json").write_text(json.dumps(saved, indent=1))
         write_page(args.out, table, saved, saved["elapsed"], saved["quick"])
         print(f"bench: wrote {args.out} ({(time.monotonic() - t0) / 60:.1f} min)",
@@ -128,7 +128,7 @@ def main(argv=None) -> int:
         rclpy.try_shutdown()
     elapsed = time.monotonic() - started
     table = format_table(results)
-    print(table + "\n\n" + latency_block(results))
+    print(table + "\n" + latency_block(results))
     saved = {"results": results, "elapsed": elapsed, "quick": quick, "machine": machine(),
              "when": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
     args.out.with_suffix(".json").write_text(json.dumps(saved, indent=1))
@@ -257,10 +257,14 @@ def format_table(r: dict) -> str:
              f"{la['floor_p50_ms']:.3f} ms = {la['floor_ratio']:.2f}×; stages below the table"
              if "floor_ratio" in la else "")
     rows.append(
-        f"| command latency, TwistStamped from another process → the control law of the cycle "
-        f"that takes it, {la['matched']} commands | p50 {la['e2e_p50_ms']:.3f} ms, p99 "
+        f"| command latency, TwistStamped from another process → "
+        + ("the control law of the cycle that takes it" if "stages" in la else
+           "the reading of the control cycle using it")
+        + f", {la['matched']} commands | p50 {la['e2e_p50_ms']:.3f} ms, p99 "
         f"{la['e2e_p99_ms']:.3f} ms"
-        + (f" (in the node's callback: p50 {la['node_rx_p50_ms']:.3f} ms)"
+        + (f" (in the node's callback: p50 {la['node_rx_p50_ms']:.3f} ms"
+           + (f", {la['ratio_to_node_rx_p50']:.2f}× that" if "ratio_to_node_rx_p50" in la
+              else "") + ")"
            if "node_rx_p50_ms" in la else "") + "; "
         f"DDS one-way p50 {la['dds_p50_ms']:.3f} ms, p99 {la['dds_p99_ms']:.3f} ms: "
         f"**{la['ratio_p50']:.2f}×**{floor} | p50 ≤ 2× DDS | {verdict(la['ratio_p50'] <= 2.0)} |")
@@ -316,7 +320,7 @@ def latency_block(results: dict) -> str:
     la = results.get("latency", {})
     if "stages" not in la:
         return ""
-    return ("Command latency, stage by stage (ms, each message followed on one clock; "
+    return ("\nCommand latency, stage by stage (ms, each message followed on one clock; "
             "`bench/ros_loop.py: command_latency`):\n\n```\n"
             + "\n".join(ros_loop.latency_lines(la)) + "\n```\n")
 
@@ -335,7 +339,6 @@ against a baseline or the raw library, in alternating blocks) or a percentile ov
 Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['machine']}.
 {''.join(f"Rows `{k}` re-run with `--only {k}` {v}." + chr(10) for k, v in saved.get('reruns', {}).items())}
 {table}
-
 {latency_block(saved['results'])}
 ## The targets not met, and what it would take
 
@@ -368,8 +371,8 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     12-17 ms in the controller part (one or two a minute; not traced: the process has no page
     faults, its collector is off); without real-time priority three 1 kHz processes (loop,
     physics, node) share two cores;
-  * *command latency* (stage by stage in the block under the table; docs/realtime.md, "The
-    command's way to the control law"): DDS itself (write to reception in the node's process)
+  * *command latency* (its stages: `python bench/run.py --only latency` prints them and puts
+    them under the table; docs/realtime.md, "The command's way to the control law"): DDS itself (write to reception in the node's process)
     and rclpy's dispatch to the callback are the same for any Python subscriber; the node's
     callback until the command is in the loop's pipe takes about 0.04 ms; then the command
     waits for the loop's next cycle: it arrives at any moment of the 1 ms period, so it waits
