@@ -366,7 +366,8 @@ PUBLISHER = """
 import random, sys, time
 import rclpy
 from geometry_msgs.msg import TwistStamped
-count, rate, topic, subscribers = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3], int(sys.argv[4])
+count, rate, topic = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+subscribers = int(sys.argv[4])
 rclpy.init()
 node = rclpy.create_node("bench_latency_publisher")
 pub = node.create_publisher(TwistStamped, topic, 10)

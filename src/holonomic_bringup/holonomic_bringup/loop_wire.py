@@ -57,9 +57,9 @@ class RecordLayout:
         n, k = self.joints, self.units
         fields = [("flags", 1), ("cycle", 1), ("stamp", 1), ("command_taken", 1), ("pose", 3),
                   ("pose_cov", 9), ("twist", 3), ("twist_cov", 9), ("twist_command", 3),
-                  ("positions", n), ("velocities", n), ("efforts", n), ("residual", k), ("state", 1),
-                  ("stale", 1), ("saturation", 1), ("truth_valid", 1), ("truth_pose", 3),
-                  ("truth_twist", 3)]
+                  ("positions", n), ("velocities", n), ("efforts", n), ("residual", k),
+                  ("state", 1), ("stale", 1), ("saturation", 1), ("truth_valid", 1),
+                  ("truth_pose", 3), ("truth_twist", 3)]
         offset = 0
         for name, length in fields:
             object.__setattr__(self, name, offset if name in _SCALARS
@@ -75,8 +75,8 @@ class RecordLayout:
 class StateRecord:
     """A read-only view of one state record (node side): the cycle's stamp
     [s, driver clock], when the cycle took its command from the command
-    pipe [s, time.monotonic()], odometry pose (x, y, yaw) [m, m, rad] in odom and its
-    3x3 covariance, twist (vx, vy, wz) in base_link and covariance, the
+    pipe [s, time.monotonic()], odometry pose (x, y, yaw) [m, m, rad] in
+    odom and its 3x3 covariance, twist (vx, vy, wz) in base_link and covariance, the
     commanded twist, joint positions [rad], velocities [rad/s], efforts
     [N m] (NaN: unknown), slip residuals [m/s], ground truth (simulator)."""
 

@@ -240,7 +240,7 @@ class BaseController:
         commands from elsewhere (:mod:`holonomic_bringup.loop_host`) hands
         over the newest (:meth:`set_command`) as late as the cycle allows,
         at a fixed point of every cycle. Not called on a cycle whose reading
-        failed."""
+        failed or was implausible (the caller then takes the command itself)."""
         self.counters["cycles"] += 1
         self._process_requests()
         try:
