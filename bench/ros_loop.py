@@ -380,8 +380,8 @@ random.seed(24)
 t0 = time.monotonic()
 for k in range(count):
     # each message at a random moment of its slot: a fixed rate on the same
-    # clock as the 1 kHz loop would keep one phase to its cycles for the
-    # whole run, and every message would wait the same part of a period
+    # clock as the 1 kHz loop could keep one phase to its cycles for the
+    # whole run, and every message wait the same part of a period
     time.sleep(max(0.0, t0 + (k + random.random()) / rate - time.monotonic()))
     msg.twist.linear.x = (k + 1) * 1e-5
     msg.header.stamp = node.get_clock().now().to_msg()

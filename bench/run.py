@@ -430,8 +430,8 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   controller node (1 kHz, mock driver, `cmd_vel_stamped`, acceleration limits out of the
   way, its loop in its own process, publishing its three 1 kHz topics) in this process; a
   publisher process sends 5000 `TwistStamped` at 200 Hz, each at a random moment of its
-  5 ms slot (a fixed rate on the loop's clock would hold one phase to the cycles for the
-  whole run, and every message would wait the same part of a period). Each message is
+  5 ms slot (a fixed rate on the loop's clock could hold one phase to the cycles for the
+  whole run, every message then waiting the same part of a period). Each message is
   followed on one clock (CLOCK_MONOTONIC; system-clock stamps converted): its stamp,
   DDS's write and reception timestamps (the message info of the node's own subscription,
   through rclpy's `Subscription.callback`), the node's callback start, the start of
