@@ -543,6 +543,9 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr",
         vx, arrival, stamp = (float(v) for v in line.split())
         arrived[round(vx, 9)] = (arrival - stamp) * 1e3
     both = [vx for vx in traced if vx in written and vx in cycles and vx in arrived]
+    if len(both) < 2:
+        raise RuntimeError(f"command latency: {len(both)} of {count} commands followed "
+                           "through every stage (the node or the subscriber got none)")
     times = np.array([[*traced[vx], written[vx], cycles[vx][1]] for vx in both])
     stages = {name: _percentiles(np.diff(times[:, k:k + 2], axis=1)[:, 0] * 1e3)
               for k, (name, _) in enumerate(LATENCY_STAGES)}
@@ -673,13 +676,16 @@ _USAGE = ("usage: python bench/ros_loop.py slice-ab [SECONDS [REPS]]\n"
 
 if __name__ == "__main__":
     # python bench/ros_loop.py slice-ab [SECONDS [REPS]] | latency [COMMANDS [REPS [publish-ab]]]
-    if len(sys.argv) < 2 or sys.argv[1] not in ("slice-ab", "latency"):
-        sys.exit(_USAGE)
     try:
+        if len(sys.argv) < 2 or sys.argv[1] not in ("slice-ab", "latency"):
+            raise ValueError
         numbers = [float(sys.argv[2]) if len(sys.argv) > 2 else None,
                    int(sys.argv[3]) if len(sys.argv) > 3 else None]
+        if any(n is not None and n <= 0 for n in numbers):
+            raise ValueError
     except ValueError:
-        sys.exit(_USAGE)
+        print(_USAGE, file=sys.stderr)
+        sys.exit(2)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", "97")
     import rclpy
