@@ -363,49 +363,114 @@ def foxglove_cost(seconds: float = 30.0, blocks: int = 2, robot: str = "hamr") -
 
 
 PUBLISHER = """
-import sys, time, os
+import random, sys, time
 import rclpy
 from geometry_msgs.msg import TwistStamped
 count, rate, topic = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+subscribers = int(sys.argv[4])
 rclpy.init()
 node = rclpy.create_node("bench_latency_publisher")
 pub = node.create_publisher(TwistStamped, topic, 10)
 deadline = time.monotonic() + 30.0
-while pub.get_subscription_count() < 2 and time.monotonic() < deadline:
+while pub.get_subscription_count() < subscribers and time.monotonic() < deadline:
     time.sleep(0.05)
 time.sleep(1.0)
 msg = TwistStamped()
+random.seed(24)
 t0 = time.monotonic()
 for k in range(count):
+    # each message at a random moment of its slot: a fixed rate on the same
+    # clock as the 1 kHz loop could keep one phase to its cycles for the
+    # whole run, and every message wait the same part of a period
+    time.sleep(max(0.0, t0 + (k + random.random()) / rate - time.monotonic()))
     msg.twist.linear.x = (k + 1) * 1e-5
     msg.header.stamp = node.get_clock().now().to_msg()
     pub.publish(msg)
-    time.sleep(max(0.0, t0 + (k + 1) / rate - time.monotonic()))
 time.sleep(0.5)
 rclpy.shutdown()
 """
 
+#: a plain rclpy subscriber in a process of its own: DDS's one-way latency
+#: as a Python ROS program sees it. Prints "vx arrival stamp" per message
+#: (system clock) once ``count`` arrived or nothing came for 5 s.
+PLAIN_SUBSCRIBER = """
+import sys, time
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from geometry_msgs.msg import TwistStamped
+count, topic = int(sys.argv[1]), sys.argv[2]
+rclpy.init()
+node = rclpy.create_node("bench_latency_plain")
+rows = []
+def on_msg(msg):
+    rows.append((msg.twist.linear.x, time.time(),
+                 msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec))
+node.create_subscription(TwistStamped, topic, on_msg, 10)
+executor = SingleThreadedExecutor()
+executor.add_node(node)
+print("ready", flush=True)
+last = time.monotonic() + 60.0
+while len(rows) < count and time.monotonic() - last < 5.0:
+    n = len(rows)
+    executor.spin_once(timeout_sec=0.1)
+    if len(rows) > n:
+        last = time.monotonic()
+for vx, arrival, stamp in rows:
+    print(f"{vx!r} {arrival!r} {stamp!r}")
+rclpy.shutdown()
+"""
 
-def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr") -> dict:
+#: the stages of a command's way, between consecutive timestamps (command_latency)
+LATENCY_STAGES = (
+    ("publish", "the publisher's stamp -> DDS's write (rclpy publish)"),
+    ("dds", "DDS's write -> its arrival in the node's process (Fast DDS's reception stamp)"),
+    ("dispatch", "arrival -> the node's cmd_vel callback starts (the executor wakes, takes "
+                 "and converts the message)"),
+    ("callback", "the callback starts -> it writes the command into the loop's command pipe"),
+    ("wait", "the write -> the loop's next cycle takes it (after its reading, immediately "
+             "before the control law)"),
+)
+
+
+def _percentiles(values_ms) -> dict:
+    values = np.asarray(values_ms)
+    return {"p50_ms": float(np.percentile(values, 50)), "p99_ms": float(np.percentile(values, 99)),
+            "mean_ms": float(values.mean())}
+
+
+def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr",
+                    node_publishes: bool = True) -> dict:
     """TwistStamped from another process -> the control cycle that uses it
     (a 1 kHz base controller node in this process, its loop in its own
     process, mock driver), against the DDS one-way latency of the same
-    messages to a plain subscriber in this process. Percentiles in ms.
+    messages to a plain rclpy subscriber in a third process. Percentiles in ms.
 
-    The cycle is seen through the node's public state-record hook
-    (``node.link.on_record``, every cycle at publish_rate 1000): the first
-    cycle whose commanded twist is the message's, timed at that cycle's
-    driver reading (monotonic clock), which precedes its joint command
-    write by the cycle's compute (tens of µs)."""
+    Each message is followed on one clock (CLOCK_MONOTONIC; the system-clock
+    stamps converted with the offset between the two clocks, which only a
+    step of the system clock changes): its stamp, DDS's write and reception
+    timestamps (the message info of the node's own subscription, whose
+    callback this function wraps through rclpy's public
+    ``Subscription.callback``), the callback's start, the start of the write
+    into the loop's command pipe (``link.send_command`` wrapped), and the
+    moment the loop took it (``command_taken`` of the first state record
+    whose commanded twist is the message's, through the node's public
+    state-record hook ``node.link.on_record``). The end-to-end time is stamp
+    -> taken: the control law uses the command right after; the cycle's
+    reading precedes that by ``reading_to_take``. ``node_publishes`` False:
+    the node does not publish the records (odom, /tf, joint_states): an A/B
+    of how much its 1 kHz publishing delays the command's callback."""
     import rclpy
     from geometry_msgs.msg import TwistStamped
     from rclpy.parameter import Parameter
 
-    from holonomic_bringup.base_controller_node import BaseControllerNode
+    from holonomic_bringup.base_controller_node import BaseControllerNode, switch_interval
 
     ns = "bench_latency"
+    topic = f"/{ns}/cmd_vel"
     params = [Parameter("robot_config", value=robot), Parameter("driver", value="mock"),
-              Parameter("control_rate", value=1000.0), Parameter("publish_rate", value=1000.0),
+              Parameter("control_rate", value=1000.0),
+              # a state record every cycle: the hook sees the first cycle using each command
+              Parameter("publish_rate", value=1000.0),
               Parameter("cmd_vel_stamped", value=True),
               Parameter("enable_on_start", value=True), Parameter("cmd_timeout", value=0.0)]
     for axis in ("linear.x", "linear.y", "angular.z"):
@@ -414,47 +479,114 @@ def command_latency(count: int = 5000, rate: float = 200.0, robot: str = "hamr")
         params += [Parameter(f"limits.{axis}.max_acceleration", value=1000.0),
                    Parameter(f"limits.{axis}.max_deceleration", value=1000.0)]
     node = BaseControllerNode(namespace=ns, parameter_overrides=params)
+    period = 1.0 / node.config.controller.control_rate
+    # as holonomic-bringup runs the node (run_robots): with Python's default
+    # 5 ms, the callback waits up to 5 ms for the lock the reader thread holds
+    switch_before = sys.getswitchinterval()
+    sys.setswitchinterval(switch_interval(node.config.controller.control_rate))
     gc.freeze()
-    written: dict[float, float] = {}
-    arrived: dict[float, float] = {}
-    stamps: dict[float, float] = {}
+    wall_minus_mono = time.time() - time.monotonic()
+    traced: dict[float, list] = {}      # vx -> [stamp, dds write, dds arrival, callback]
+    written: dict[float, float] = {}    # vx -> start of the pipe write
+    cycles: dict[float, tuple] = {}     # vx -> (reading, taken) of the first cycle using it
     link = node.link
     publish = link.on_record
+    send = link.send_command
 
     def on_record(record):
         vx = round(float(record.twist_command[0]), 9)
-        if vx and vx not in written:
-            # the cycle's reading on the wall clock
-            written[vx] = time.time() - (time.monotonic() - record.stamp)
-        publish(record)
+        if vx and vx not in cycles:
+            cycles[vx] = (record.stamp, record.command_taken)
+        if node_publishes:
+            publish(record)
+
+    def send_command(twist, received):
+        # stamped before the write: after it, this thread may wait for the
+        # interpreter lock while the loop already has the command
+        written[round(twist[0], 9)] = time.monotonic()
+        send(twist, received)
+
+    subscription = next(s for s in node.subscriptions if s.topic_name == topic)
+    callback = subscription.callback
+
+    def on_cmd_vel(msg, info):          # two arguments: rclpy passes the message info
+        start = time.monotonic()
+        stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        traced[round(msg.twist.linear.x, 9)] = [
+            stamp - wall_minus_mono, info["source_timestamp"] * 1e-9 - wall_minus_mono,
+            info["received_timestamp"] * 1e-9 - wall_minus_mono, start]
+        callback(msg)
 
     link.on_record = on_record
-    plain = rclpy.create_node("bench_latency_plain")
-
-    def on_plain(msg):
-        now = time.time()
-        vx = round(msg.twist.linear.x, 9)
-        arrived[vx] = now
-        stamps[vx] = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-
-    plain.create_subscription(TwistStamped, f"/{ns}/cmd_vel", on_plain, 10)
-    finish = _spin([node, plain])
+    link.send_command = send_command
+    subscription.callback = on_cmd_vel
+    finish = _spin([node])
+    plain = subprocess.Popen([sys.executable, "-c", PLAIN_SUBSCRIBER, str(count), topic],
+                             stdout=subprocess.PIPE, text=True)
     try:
-        subprocess.run([sys.executable, "-c", PUBLISHER, str(count), str(rate),
-                        f"/{ns}/cmd_vel"], check=True, timeout=count / rate + 60)
+        plain.stdout.readline()          # "ready"
+        subprocess.run([sys.executable, "-c", PUBLISHER, str(count), str(rate), topic, "2"],
+                       check=True, timeout=count / rate + 60)
+        out, _ = plain.communicate(timeout=30)
         time.sleep(0.2)
     finally:
+        if plain.poll() is None:
+            plain.kill()
+            plain.wait()
         finish()
         node.shutdown()
         node.destroy_node()
-        plain.destroy_node()
-    both = [vx for vx in stamps if vx in written]
-    dds = np.array([arrived[vx] - stamps[vx] for vx in both]) * 1e3
-    e2e = np.array([written[vx] - stamps[vx] for vx in both]) * 1e3
+        sys.setswitchinterval(switch_before)
+    step_ms = abs(time.time() - time.monotonic() - wall_minus_mono) * 1e3
+    arrived = {}
+    for line in out.splitlines():
+        vx, arrival, stamp = (float(v) for v in line.split())
+        arrived[round(vx, 9)] = (arrival - stamp) * 1e3
+    both = [vx for vx in traced if vx in written and vx in cycles and vx in arrived]
+    if len(both) < 2:
+        raise RuntimeError(f"command latency: {len(both)} of {count} commands followed "
+                           "through every stage (the node or the subscriber got none)")
+    times = np.array([[*traced[vx], written[vx], cycles[vx][1]] for vx in both])
+    stages = {name: _percentiles(np.diff(times[:, k:k + 2], axis=1)[:, 0] * 1e3)
+              for k, (name, _) in enumerate(LATENCY_STAGES)}
+    e2e = (times[:, -1] - times[:, 0]) * 1e3
+    dds = np.array([arrived[vx] for vx in both])
+    reading_to_take = np.array([cycles[vx][1] - cycles[vx][0] for vx in both]) * 1e3
+    e2e_p50, dds_p50 = float(np.percentile(e2e, 50)), float(np.percentile(dds, 50))
+    node_rx_p50 = float(np.percentile((times[:, 3] - times[:, 0]) * 1e3, 50))
+    # the design's floor: the command cannot be used before the next cycle,
+    # on average half a period after it arrives (fixed-period sampling of a
+    # message stream with no phase relation to the loop)
+    floor_p50 = dds_p50 + 0.5 * period * 1e3
     return {"robot": robot, "commands": count, "matched": len(both),
-            "dds_p50_ms": float(np.percentile(dds, 50)), "dds_p99_ms": float(np.percentile(dds, 99)),
-            "e2e_p50_ms": float(np.percentile(e2e, 50)), "e2e_p99_ms": float(np.percentile(e2e, 99)),
-            "ratio_p50": float(np.percentile(e2e, 50) / np.percentile(dds, 50))}
+            "dds_p50_ms": dds_p50, "dds_p99_ms": float(np.percentile(dds, 99)),
+            "e2e_p50_ms": e2e_p50, "e2e_p99_ms": float(np.percentile(e2e, 99)),
+            "ratio_p50": e2e_p50 / dds_p50,
+            "stages": stages, "reading_to_take": _percentiles(reading_to_take),
+            # DDS one-way into the node itself (stamp -> its callback starts)
+            "node_rx_p50_ms": node_rx_p50, "ratio_to_node_rx_p50": e2e_p50 / node_rx_p50,
+            "period_ms": period * 1e3, "floor_p50_ms": floor_p50,
+            "floor_ratio": floor_p50 / dds_p50, "clock_step_ms": step_ms,
+            "node_publishes": node_publishes}
+
+
+def latency_lines(r: dict) -> list[str]:
+    """The command latency's breakdown as text lines (bench output and page)."""
+    lines = [f"{r['matched']} of {r['commands']} commands; end to end p50 "
+             f"{r['e2e_p50_ms']:.3f} ms, p99 {r['e2e_p99_ms']:.3f} ms; DDS one-way to a plain "
+             f"subscriber p50 {r['dds_p50_ms']:.3f} ms, p99 {r['dds_p99_ms']:.3f} ms: "
+             f"{r['ratio_p50']:.2f}x; to the node's own callback (DDS one-way into the node) "
+             f"p50 {r['node_rx_p50_ms']:.3f} ms: {r['ratio_to_node_rx_p50']:.2f}x"]
+    for name, what in LATENCY_STAGES:
+        st = r["stages"][name]
+        lines.append(f"{name:9s} p50 {st['p50_ms']:.3f}  p99 {st['p99_ms']:.3f}  mean "
+                     f"{st['mean_ms']:.3f} ms  {what}")
+    rt = r["reading_to_take"]
+    lines.append(f"the cycle's reading precedes the take by p50 {rt['p50_ms']:.3f} ms, "
+                 f"p99 {rt['p99_ms']:.3f} ms")
+    lines.append(f"floor of the design (DDS one-way + half a {r['period_ms']:g} ms period): "
+                 f"p50 {r['floor_p50_ms']:.3f} ms = {r['floor_ratio']:.2f}x DDS")
+    return lines
 
 
 def memory_growth(seconds: float = 240.0, robot: str = "hamr") -> dict:
@@ -538,15 +670,38 @@ def _ab_line(r: dict) -> str:
             f"{r['joint_states_hz']:.0f} joint_states/s")
 
 
+_USAGE = ("usage: python bench/ros_loop.py slice-ab [SECONDS [REPS]]\n"
+          "       python bench/ros_loop.py latency [COMMANDS [REPS [publish-ab]]]")
+
+
 if __name__ == "__main__":
-    # python bench/ros_loop.py slice-ab [SECONDS [REPS]]
-    if len(sys.argv) < 2 or sys.argv[1] != "slice-ab":
-        sys.exit("usage: python bench/ros_loop.py slice-ab [SECONDS [REPS]]")
+    # python bench/ros_loop.py slice-ab [SECONDS [REPS]] | latency [COMMANDS [REPS [publish-ab]]]
+    try:
+        if len(sys.argv) < 2 or sys.argv[1] not in ("slice-ab", "latency"):
+            raise ValueError
+        numbers = [float(sys.argv[2]) if len(sys.argv) > 2 else None,
+                   int(sys.argv[3]) if len(sys.argv) > 3 else None]
+        if any(n is not None and n <= 0 for n in numbers):
+            raise ValueError
+    except ValueError:
+        print(_USAGE, file=sys.stderr)
+        sys.exit(2)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", "97")
     import rclpy
     rclpy.init()
     try:
-        slice_ab(*(float(a) for a in sys.argv[2:3]), *(int(a) for a in sys.argv[3:4]))
+        if sys.argv[1] == "slice-ab":
+            slice_ab(numbers[0] or 25.0, numbers[1] or 3)
+        else:
+            # with "publish-ab": alternately with and without the node's 1 kHz publishing
+            variants = (True, False) if "publish-ab" in sys.argv[4:] else (True,)
+            for rep in range(numbers[1] or 1):
+                for publishes in variants:
+                    result = command_latency(int(numbers[0] or 3000), node_publishes=publishes)
+                    print(f"run {rep + 1}, node {'publishing' if publishes else 'silent'}, "
+                          f"load {os.getloadavg()[0]:.1f}:", flush=True)
+                    for line in latency_lines(result):
+                        print("  " + line, flush=True)
     finally:
         rclpy.try_shutdown()

@@ -70,10 +70,11 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
     parser.add_argument("--render", type=Path, metavar="JSON",
                         help="only rewrite the page from a previous run's results")
-    parser.add_argument("--only", choices=("sim", "compute", "loop"),
+    parser.add_argument("--only", choices=("sim", "compute", "loop", "latency"),
                         help="re-run only the simulation-speed rows (ideal motors and drive "
-                             "model), the control-cycle compute rows, or the 1 kHz loop and "
-                             "command latency rows; the page keeps the last run's others")
+                             "model), the control-cycle compute rows, the 1 kHz loop and "
+                             "command latency rows, or the command latency alone; the page "
+                             "keeps the last run's others")
     args = parser.parse_args(argv)
     if args.only:
         saved = json.loads(args.out.with_suffix(".json").read_text())
@@ -83,13 +84,15 @@ def main(argv=None) -> int:
             saved["results"]["sim_drive"] = sim_drive_rows(_step, args.quick)
         elif args.only == "compute":
             saved["results"]["compute"] = compute_rows(_step, args.quick)
+        elif args.only == "latency":
+            saved["results"]["latency"] = latency_row(_step, args.quick)
         else:
             saved["results"].update(loop_rows(_step, args.quick))
         saved.setdefault("reruns", {})[args.only] = (
             datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
             + f" on: {machine()}")
         table = format_table(saved["results"])
-        print(table)
+        print(table + "\n" + latency_block(saved["results"]))
         args.out.with_suffix(".json").write_text(json.dumps(saved, indent=1))
         write_page(args.out, table, saved, saved["elapsed"], saved["quick"])
         print(f"bench: wrote {args.out} ({(time.monotonic() - t0) / 60:.1f} min)",
@@ -125,7 +128,7 @@ def main(argv=None) -> int:
         rclpy.try_shutdown()
     elapsed = time.monotonic() - started
     table = format_table(results)
-    print(table)
+    print(table + "\n" + latency_block(results))
     saved = {"results": results, "elapsed": elapsed, "quick": quick, "machine": machine(),
              "when": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
     args.out.with_suffix(".json").write_text(json.dumps(saved, indent=1))
@@ -156,6 +159,18 @@ def loop_rows(step, quick: bool, init: bool = True) -> dict:
     finally:
         if init:
             rclpy.try_shutdown()
+
+
+def latency_row(step, quick: bool) -> dict:
+    """The command latency alone (``--only latency``)."""
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", "97")
+    import rclpy
+    rclpy.init()
+    try:
+        return step("command latency", ros_loop.command_latency, 1000 if quick else 5000)
+    finally:
+        rclpy.try_shutdown()
 
 
 def sim_rows(step, quick: bool) -> list[dict]:
@@ -238,13 +253,21 @@ def format_table(r: dict) -> str:
             f"{limit_max:g} ms | {verdict(lp['period_p99_ms_worst_window'] <= limit_p99)} (p99), "
             f"{verdict(none_later)} (max) |")
     la = r["latency"]
+    floor = (f"; the design's floor (DDS one-way + half a period) "
+             f"{la['floor_p50_ms']:.3f} ms = {la['floor_ratio']:.2f}×; stages below the table"
+             if "floor_ratio" in la else "")
     rows.append(
-        f"| command latency, TwistStamped from another process → the control cycle using it, "
-        f"{la['matched']} commands | p50 {la['e2e_p50_ms']:.3f} ms, p99 {la['e2e_p99_ms']:.3f} ms"
-        + (f" (in the node's callback: p50 {la['node_rx_p50_ms']:.3f} ms)"
+        f"| command latency, TwistStamped from another process → "
+        + ("the control law of the cycle that takes it" if "stages" in la else
+           "the reading of the control cycle using it")
+        + f", {la['matched']} commands | p50 {la['e2e_p50_ms']:.3f} ms, p99 "
+        f"{la['e2e_p99_ms']:.3f} ms"
+        + (f" (in the node's callback: p50 {la['node_rx_p50_ms']:.3f} ms"
+           + (f", {la['ratio_to_node_rx_p50']:.2f}× that" if "ratio_to_node_rx_p50" in la
+              else "") + ")"
            if "node_rx_p50_ms" in la else "") + "; "
         f"DDS one-way p50 {la['dds_p50_ms']:.3f} ms, p99 {la['dds_p99_ms']:.3f} ms: "
-        f"**{la['ratio_p50']:.2f}×** | p50 ≤ 2× DDS | {verdict(la['ratio_p50'] <= 2.0)} |")
+        f"**{la['ratio_p50']:.2f}×**{floor} | p50 ≤ 2× DDS | {verdict(la['ratio_p50'] <= 2.0)} |")
     for s in r["sim"]:
         rows.append(
             f"| simulation speed, {s['robot']}, controller in the loop, 1 kHz physics, "
@@ -291,6 +314,17 @@ def format_table(r: dict) -> str:
     return "\n".join(rows)
 
 
+def latency_block(results: dict) -> str:
+    """The command latency stage by stage (a results' ``latency`` with
+    ``stages``), as a fenced block; empty for older results."""
+    la = results.get("latency", {})
+    if "stages" not in la:
+        return ""
+    return ("\nCommand latency, stage by stage (ms, each message followed on one clock; "
+            "`bench/ros_loop.py: command_latency`):\n\n```\n"
+            + "\n".join(ros_loop.latency_lines(la)) + "\n```\n")
+
+
 def write_page(path: Path, table: str, saved: dict, elapsed: float, quick: bool) -> None:
     odometry = (ROOT / "docs" / "odometry_experiment.md").read_text()
     start = odometry.index("## Results")
@@ -305,7 +339,7 @@ against a baseline or the raw library, in alternating blocks) or a percentile ov
 Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['machine']}.
 {''.join(f"Rows `{k}` re-run with `--only {k}` {v}." + chr(10) for k, v in saved.get('reruns', {}).items())}
 {table}
-
+{latency_block(saved['results'])}
 ## The targets not met, and what it would take
 
 - **1 kHz loop** (docs/realtime.md, "What limits the jitter"). The loop runs in a process of
@@ -337,11 +371,19 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     12-17 ms in the controller part (one or two a minute; not traced: the process has no page
     faults, its collector is off); without real-time priority three 1 kHz processes (loop,
     physics, node) share two cores;
-  * *command latency*: the loop takes a command at the start of its next cycle, on average half
-    a period (0.5 ms at 1 kHz) after the node forwards it, so the end-to-end time is about the
-    DDS hop + 0.5 ms + the forwarding: the ratio to DDS one-way rises when DDS is fast (0.53-0.73
-    ms one-way on the idle machine at 16:39 against 0.88 ms at the previous measurement: 2.03-2.4×
-    for an end-to-end p50 of 1.1-1.5 ms, about the same as before);
+  * *command latency* (its stages: `python bench/run.py --only latency` prints them and puts
+    them under the table; docs/realtime.md, "The command's way to the control law"): DDS itself (write to reception in the node's process)
+    and rclpy's dispatch to the callback are the same for any Python subscriber; the node's
+    callback until the command is in the loop's pipe takes about 0.04 ms; then the command
+    waits for the loop's next cycle: it arrives at any moment of the 1 ms period, so it waits
+    up to a period, on average half. The loop takes it after its reading, immediately
+    before the control law (`BaseController.step(take_command)`), not at the start of the
+    cycle. So the end-to-end p50 is about DDS one-way + 0.04 ms + 0.5 ms, and **the floor
+    of a fixed-period 1 kHz loop is DDS one-way + half a period**: the ratio can reach 2×
+    only where DDS one-way is above about 0.55 ms (0.35 ms on this machine when idle:
+    a floor of about 2.6×). Running an extra control cycle when a command arrives would
+    remove the wait and break the fixed period the limiter, the odometry, the torque law
+    and the drives' SYNC and watchdogs are built on; it is not done;
   * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz; on a loaded
     machine the node and the bench's own subscriber fall behind (fewer than 1000
     joint_states a second received), and the outside periods then measure the publishing
@@ -381,13 +423,24 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   clock, for the simulator simulated time, so only the mock's say anything) and between their
   arrivals here (DDS and this subscriber included). A received rate below 1000/s means the
   node or this subscriber did not keep up with three 1 kHz topics.
-- **Command latency**: a base controller node (1 kHz, mock driver, `cmd_vel_stamped`,
-  acceleration limits out of the way, its loop in its own process) in this process; the
-  node's public state-record hook (`node.link.on_record`, every cycle) times the first cycle
-  whose commanded twist is each `TwistStamped`'s, at that cycle's driver reading (its joint
-  command is written tens of µs later); the publisher is another process stamping each
-  message with the system clock; a plain subscriber in this process gives DDS's one-way
-  latency for the same messages.
+- **Command latency** (`python bench/run.py --only latency` re-runs this row and its
+  stages on the page; `python bench/ros_loop.py latency 3000 3` repeats it three times and
+  only prints; `... latency 3000 3 publish-ab` alternates with a node that does not
+  publish its 1 kHz topics): a base
+  controller node (1 kHz, mock driver, `cmd_vel_stamped`, acceleration limits out of the
+  way, its loop in its own process, publishing its three 1 kHz topics) in this process; a
+  publisher process sends 5000 `TwistStamped` at 200 Hz, each at a random moment of its
+  5 ms slot (a fixed rate on the loop's clock could hold one phase to the cycles for the
+  whole run, every message then waiting the same part of a period). Each message is
+  followed on one clock (CLOCK_MONOTONIC; system-clock stamps converted): its stamp,
+  DDS's write and reception timestamps (the message info of the node's own subscription,
+  through rclpy's `Subscription.callback`), the node's callback start, the start of
+  its write into the loop's command pipe, and when the loop took it (`command_taken` in the
+  state record of the first cycle whose commanded twist is the message's, through the
+  node's state-record hook `node.link.on_record`); the end-to-end time is stamp -> taken,
+  the control law runs right after. DDS one-way is the same messages' latency to a plain
+  rclpy subscriber in a process of its own; the row also gives the ratio to the node's own
+  callback start (DDS one-way into the node, the same path without the loop).
 - **Simulation speed**: `BaseController` + `sim` driver stepped as fast as possible (1 kHz
   physics, 200 Hz control, a constant twist), against raw pybullet: the time the
   `pybullet.stepSimulation` calls of the same run take alone (each timed); once with ideal

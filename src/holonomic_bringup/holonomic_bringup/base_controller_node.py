@@ -653,6 +653,15 @@ def main(argv: list[str] | None = None, record: str | None = None, foxglove=None
     return run_robots([{}], record=record, foxglove=foxglove, prog=NODE_NAME)
 
 
+def switch_interval(control_rate: float) -> float:
+    """The interpreter's thread switch interval [s] for a node whose loop
+    runs at ``control_rate`` [Hz]: a fifth of a period, at most 0.5 ms. The
+    reader thread publishes every cycle and the executor thread runs the
+    cmd_vel callback: each must get the interpreter lock back from the
+    other well within a period (Python's default is 5 ms)."""
+    return min(5e-4, 0.2 / control_rate)
+
+
 def run_robots(robots: list[dict], record: str | None = None, foxglove=None,
                prog: str = NODE_NAME, shared_world: bool = False, label=None) -> int:
     """The runner of ``holonomic-bringup``, for one robot and for a fleet:
@@ -701,9 +710,7 @@ def run_robots(robots: list[dict], record: str | None = None, foxglove=None,
         for node, link in zip(nodes, client.links):
             node.attach(link)
             executor.add_node(node)
-        # The node's reader thread publishes up to 1 kHz: it must get the GIL
-        # back from the executor's callbacks well within a period.
-        sys.setswitchinterval(min(5e-4, 0.2 / nodes[0].config.controller.control_rate))
+        sys.setswitchinterval(switch_interval(nodes[0].config.controller.control_rate))
         # Everything built so far lives for the whole run: out of the garbage
         # collector's way, so that its full collections stay short.
         gc.freeze()

@@ -77,7 +77,8 @@ class RobotLink:
 
     def read_records(self) -> bool:
         """Read what the state pipe holds; ``on_record`` each whole record
-        (the client's reader thread). False at the pipe's end (the loop is gone)."""
+        (the client's reader thread) until :meth:`LoopClient.stop` is
+        called. False at the pipe's end (the loop is gone)."""
         try:
             data = os.read(self.state_fd, _PIPE_SIZE)
         except BlockingIOError:
@@ -91,6 +92,11 @@ class RobotLink:
         if whole:
             block = np.frombuffer(data[:whole], dtype=np.float64).reshape(-1, self.layout.size)
             for row in block:
+                if self.client.stopping:
+                    # the node is tearing down its publishers: the loop's
+                    # backlog (up to a second of records when the machine
+                    # is loaded) is not published into them
+                    break
                 self.on_record(wire.StateRecord(row, self.layout))
         return True
 
@@ -224,6 +230,11 @@ class LoopClient:
                 self._pending.pop(rid, None)
             future.set_result((False, "the control loop does not take requests"))
         return future
+
+    @property
+    def stopping(self) -> bool:
+        """:meth:`stop` was called: records are no longer delivered."""
+        return self._stopping
 
     @property
     def lost(self) -> str | None:

@@ -5,8 +5,10 @@ The ROS node (``base_controller_node``) is a shell around it; they talk
 through three kinds of channel (:mod:`holonomic_bringup.loop_wire`):
 
 * commands, node -> loop: one pipe per robot of fixed 32-byte records
-  ``(vx, vy, wz, received)``; the loop drains it every cycle and the latest
-  command wins;
+  ``(vx, vy, wz, received)``; the loop drains it every cycle, after the
+  cycle's reading and immediately before the control law uses the command
+  (:meth:`BaseController.step`'s ``take_command``), and the latest command
+  wins;
 * state, loop -> node: one pipe per robot of fixed-size records (the
   cycle's reading, odometry, command; :class:`~loop_wire.RecordLayout`)
   written every ``publish_rate`` cycle; the node blocks on it and publishes;
@@ -93,12 +95,19 @@ class _Robot:
         self.diag_every = max(1, round(ctrl.control_rate))
         self.has_truth = controller.driver.ground_truth() is not None
         self.cycle = 0
+        #: when this cycle drained the command pipe [s, time.monotonic()]; None: not yet
+        self.command_taken: float | None = None
         self.errors = 0
         self.dropped = 0
         self.pending: list = []         # (future, request id)
         self._states = {s: float(k) for k, s in enumerate(ControllerState)}
 
     def drain_commands(self) -> None:
+        """Hand the commands the pipe holds to the controller (the latest
+        wins). Called once a cycle, as late as the cycle allows (see
+        :meth:`BaseController.step`): a command that arrives while the cycle
+        reads the drives is still used by it."""
+        self.command_taken = time.monotonic()
         try:
             data = os.read(self.command_fd, 1 << 16)
         except BlockingIOError:
@@ -113,6 +122,7 @@ class _Robot:
         r[lay.flags] = flags
         r[lay.cycle] = self.cycle
         r[lay.stamp] = reading.stamp
+        r[lay.command_taken] = self.command_taken
         r[lay.pose] = odo.pose
         r[lay.pose_cov] = odo.pose_covariance.ravel()
         r[lay.twist] = odo.twist
@@ -283,10 +293,12 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
 
     def robot_cycle(r: _Robot) -> None:
         r.cycle += 1
-        r.drain_commands()
+        r.command_taken = None
         t = clock()
-        r.controller.step()
+        r.controller.step(r.drain_commands)
         add_part("controller", clock() - t)
+        if r.command_taken is None:     # a cycle that failed before its control law
+            r.drain_commands()
         if r.pending:
             answer(r)
         if r.controller.reading is not None:

@@ -28,7 +28,8 @@ PUBLISH, CLOCK = 1, 2
 HEARTBEAT_SIZE = 8
 
 
-_SCALARS = ("flags", "cycle", "stamp", "state", "stale", "saturation", "truth_valid")
+_SCALARS = ("flags", "cycle", "stamp", "command_taken", "state", "stale", "saturation",
+            "truth_valid")
 
 
 @dataclass(frozen=True)
@@ -45,11 +46,11 @@ class RecordLayout:
 
     def __post_init__(self):
         n, k = self.joints, self.units
-        fields = [("flags", 1), ("cycle", 1), ("stamp", 1), ("pose", 3), ("pose_cov", 9),
-                  ("twist", 3), ("twist_cov", 9), ("twist_command", 3), ("positions", n),
-                  ("velocities", n), ("efforts", n), ("residual", k), ("state", 1),
-                  ("stale", 1), ("saturation", 1), ("truth_valid", 1), ("truth_pose", 3),
-                  ("truth_twist", 3)]
+        fields = [("flags", 1), ("cycle", 1), ("stamp", 1), ("command_taken", 1), ("pose", 3),
+                  ("pose_cov", 9), ("twist", 3), ("twist_cov", 9), ("twist_command", 3),
+                  ("positions", n), ("velocities", n), ("efforts", n), ("residual", k),
+                  ("state", 1), ("stale", 1), ("saturation", 1), ("truth_valid", 1),
+                  ("truth_pose", 3), ("truth_twist", 3)]
         offset = 0
         for name, length in fields:
             object.__setattr__(self, name, offset if name in _SCALARS
@@ -64,8 +65,9 @@ class RecordLayout:
 
 class StateRecord:
     """A read-only view of one state record (node side): the cycle's stamp
-    [s, driver clock], odometry pose (x, y, yaw) [m, m, rad] in odom and its
-    3x3 covariance, twist (vx, vy, wz) in base_link and covariance, the
+    [s, driver clock], when the cycle took its command from the command
+    pipe [s, time.monotonic()], odometry pose (x, y, yaw) [m, m, rad] in
+    odom and its 3x3 covariance, twist (vx, vy, wz) in base_link and covariance, the
     commanded twist, joint positions [rad], velocities [rad/s], efforts
     [N m] (NaN: unknown), slip residuals [m/s], ground truth (simulator)."""
 
@@ -80,6 +82,7 @@ class StateRecord:
     flags = property(lambda self: int(self._get("flags")))
     cycle = property(lambda self: int(self._get("cycle")))
     stamp = property(lambda self: float(self._get("stamp")))
+    command_taken = property(lambda self: float(self._get("command_taken")))
     pose = property(lambda self: self._get("pose"))
     pose_covariance = property(lambda self: self._get("pose_cov").reshape(3, 3))
     twist = property(lambda self: self._get("twist"))

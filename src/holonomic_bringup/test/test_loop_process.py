@@ -59,6 +59,47 @@ def test_status_reports_counters_command_and_state():
     assert status.cycles == 2 and status.residual == ()       # the DDROT has no casters
 
 
+def test_the_first_cycle_after_a_command_is_written_takes_it_after_its_reading():
+    # the loop process (mock driver, 1 kHz, a record every cycle) drains the
+    # command pipe once a cycle, after the reading and before the control
+    # law, and says when in each record (command_taken): the first record
+    # commanding the twist is the first cycle that drained the pipe after
+    # the write, and its reading came before the take
+    from holonomic_bringup.loop_client import LoopClient
+    from holonomic_core.config import read_params_file, resolve_config
+
+    path = resolve_config("hamr")
+    flat = read_params_file(path)
+    flat.update({"driver": "mock", "control_rate": 1000.0, "publish_rate": 1000.0,
+                 "enable_on_start": True, "loop.realtime": False})
+    cfg = load_config("hamr", {"driver": "mock"})
+    client = LoopClient([(flat, str(path), cfg.model)])
+    records = []
+    client.links[0].on_record = records.append     # the client's reader thread
+    client.start()
+    try:
+        armed = _STATE_INDEX[ControllerState.ARMED]
+        wait_until(lambda: records and records[-1].state_index == armed, 10.0, "armed")
+        client.links[0].send_command((0.2, 0.0, 0.0), time.monotonic())
+        written = time.monotonic()
+        wait_until(lambda: any(r.twist_command[0] > 0.0 for r in records[-50:]), 10.0,
+                   "a cycle commanding the twist")
+    finally:
+        client.stop()
+    first = next(k for k, r in enumerate(records) if r.twist_command[0] > 0.0)
+    used, before = records[first], records[first - 1]
+    assert used.cycle == before.cycle + 1            # consecutive cycles, none dropped
+    # the cycle before drained the pipe before the write ended (else it
+    # would have taken the command)
+    assert before.command_taken < written
+    # the mock stamps its readings on the same clock (time.monotonic): each
+    # cycle took its command after its reading
+    assert before.stamp <= before.command_taken < used.stamp <= used.command_taken
+
+
+_STATE_INDEX = {s: k for k, s in enumerate(ControllerState)}
+
+
 def test_a_fault_raised_from_outside_disarms_and_the_first_cause_stays():
     ctrl, clock = _controller()
     ctrl.request_enable(True)

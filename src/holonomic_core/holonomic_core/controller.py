@@ -232,8 +232,15 @@ class BaseController:
             drift_values={} if self.drift is None else dict(self.drift.values()))
 
     # -- the cycle (loop thread) ----------------------------------------------------
-    def step(self) -> bool:
-        """Run one control cycle. Returns False if the driver failed this cycle."""
+    def step(self, take_command: Callable[[], None] | None = None) -> bool:
+        """Run one control cycle. Returns False if the driver failed this cycle.
+
+        ``take_command()``: called after the reading, immediately before the
+        command is used (and on a disarmed cycle), so that a loop receiving
+        commands from elsewhere (:mod:`holonomic_bringup.loop_host`) hands
+        over the newest (:meth:`set_command`) as late as the cycle allows,
+        at a fixed point of every cycle. Not called on a cycle whose reading
+        failed or was implausible (the caller then takes the command itself)."""
         self.counters["cycles"] += 1
         self._process_requests()
         try:
@@ -261,6 +268,8 @@ class BaseController:
             self.slip_monitor.update(self.odometry.residual, reading.stamp)
         if self.drift is not None:
             self.drift.update(reading.stamp, reading.positions)
+        if take_command is not None:
+            take_command()
 
         if not self.driver.armed:
             self.twist_command[:] = 0.0

@@ -491,3 +491,48 @@ def test_status_reports_the_drift_watch_only_where_it_applies():
     assert s.drift_findings == () and s.drift_judged is False
     hamr, _, _ = make()
     assert hamr.status().drift_findings is None and hamr.status().drift_judged is False
+
+
+class RecordingMock(MockDriver):
+    """A mock that logs its reads into a shared event list."""
+
+    events: list
+
+    def _on_read(self):
+        self.events.append("read")
+        return super()._on_read()
+
+
+def test_take_command_runs_after_the_reading_and_its_command_is_used_in_that_cycle():
+    # loop_host hands the newest command over through step(take_command):
+    # after the cycle's reading, so a command that arrives while the cycle
+    # reads the drives is used by this cycle, not the next one
+    ctrl, driver, clock = make(RecordingMock)
+    events = driver.events = []
+    arm(ctrl, clock)
+    events.clear()
+
+    def take():
+        events.append("take")
+        ctrl.set_command((0.2, 0.0, 0.0))
+
+    clock.t += ctrl.dt
+    ctrl.step(take)
+    assert events == ["read", "take"]
+    # the limiter moves the twist toward the command already in this cycle
+    # (from rest: by max_acceleration x dt, > 0); had the command been taken
+    # after the control law, this cycle would still command zero
+    assert 0.0 < ctrl.twist_command[0] <= 0.2
+    assert np.any(ctrl.joint_command != 0.0)
+
+
+def test_take_command_also_runs_disarmed_but_not_when_the_reading_fails():
+    ctrl, driver, clock = make(FlakyMock)
+    taken = []
+    clock.t += ctrl.dt
+    assert ctrl.step(lambda: taken.append(clock.t))
+    assert taken == [clock.t]            # disarmed: still drained (counted, not used)
+    driver.fail = True
+    clock.t += ctrl.dt
+    assert not ctrl.step(lambda: taken.append(clock.t))
+    assert len(taken) == 1               # the caller drains that cycle itself (loop_host)
