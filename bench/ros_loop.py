@@ -137,7 +137,10 @@ _SPLIT_KEYS = ("wake_late_p99_ms", "wake_late_max_ms", "compute_p99_ms", "comput
                "preempted_max_ms", "controller_p99_ms", "controller_max_ms",
                "physics_p99_ms", "physics_max_ms", "state_write_p99_ms",
                "state_write_max_ms", "status_p99_ms", "status_max_ms", "gc_p99_ms",
-               "gc_max_ms")
+               "gc_max_ms",
+               # since the loop started (not only the measured window)
+               "page_faults", "slowest_cpu_ms", "slowest_page_faults",
+               "slowest_controller_ms", "slowest_physics_ms")
 _CAUSE_KEYS = ("over_2ms_woke_late", "over_2ms_compute", "over_2ms_preempted")
 
 
