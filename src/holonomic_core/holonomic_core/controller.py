@@ -237,7 +237,7 @@ class BaseController:
 
         ``take_command()``: called after the reading, immediately before the
         command is used (and on a disarmed cycle), so that a loop receiving
-        commands from elsewhere (:mod:`holonomic_bringup.loop_host`) hands
+        commands from elsewhere (the control loop process's command pipe) hands
         over the newest (:meth:`set_command`) as late as the cycle allows,
         at a fixed point of every cycle. Not called on a cycle whose reading
         failed or was implausible (the caller then takes the command itself)."""
