@@ -297,7 +297,9 @@ class SimDriver(Driver):
         # the encoders report the angle plus their zero's error and the
         # configured offset, which the controller subtracts again
         positions = positions + self._reading_offset
-        return JointReading(self._world.time, positions, velocities, efforts)
+        # stamped with the time the positions describe (a drive's feedback is
+        # feedback_delay old), as the CAN drivers stamp theirs
+        return JointReading(self._robot.sample_time, positions, velocities, efforts)
 
     def _on_write_velocities(self, velocities: np.ndarray) -> None:
         if self._link is not None:
@@ -327,7 +329,8 @@ class SimDriver(Driver):
             return self._link.ground_truth()
         if self._robot is None:
             return None
-        return GroundTruth(self._world.time, self._robot.pose(), self._robot.body_twist())
+        # at the newest reading's stamp: the truth that goes with it
+        return GroundTruth(self._robot.sample_time, *self._robot.sampled_truth())
 
     def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The floor's contact points on the robot and their planar friction
