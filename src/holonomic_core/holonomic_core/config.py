@@ -173,9 +173,10 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "Heading variance added per squared RMS contact residual, per second [s/m^2] "
               "(rad^2 per (m/s)^2 s).", default=2.81, minimum=0.0, maximum=1e6),
     ParamSpec("odometry.latency_variance", "double",
-              "Mean square of the readings' latency [s^2]: the published pose covariance "
-              "adds latency_variance x u u^T, u the current twist in odom (the pose error of "
-              "a delay, which does not accumulate).", default=6.5e-07, minimum=0.0, maximum=1.0),
+              "Mean square of the readings' latency (how much older a reading is than its "
+              "stamp) [s^2]: the published pose covariance adds latency_variance x u u^T, u "
+              "the current twist in odom (the pose error of a delay, which does not "
+              "accumulate).", default=6.5e-07, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
               "[(m/s)^2, (m/s)^2, (rad/s)^2].",

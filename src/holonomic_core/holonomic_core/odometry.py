@@ -60,9 +60,10 @@ class OdometryNoise:
     ``slip_heading_gain`` [s/m^2]. They make the covariance scale with the
     slip level (sigma ~ rho), which a term linear in rho does not.
 
-    Latency, a term that does not accumulate: the readings are older than
-    their stamps (the drive's feedback and bus delays), so the published
-    pose is where the base was a time
+    Latency, a term that does not accumulate: a reading older than its
+    stamp (a delay its driver does not know of: a drive's filter, a reading
+    stamped when it arrived rather than when it was sampled) puts the
+    published pose where the base was a time
     ``tau`` before the stamp, off from the true pose by ``tau * u`` with
     ``u = (R(yaw) (vx, vy), wz)`` the current twist in odom. With ``tau``
     unknown but of variance ``latency_variance`` [s^2] (its mean square: a
