@@ -85,12 +85,12 @@ class OdometryNoise:
     linear_variance_per_meter: float = 0.0
     angular_variance_per_radian: float = 0.0
     angular_variance_per_meter: float = 0.0
-    slip_position_gain: float = 0.236
+    slip_position_gain: float = 0.193
     slip_heading_gain: float = 2.81
-    twist_variance: tuple[float, float, float] = (7.51e-06, 5.89e-06, 3.48e-05)
-    twist_slip_gain: tuple[float, float, float] = (0.285, 0.327, 6.17)
-    twist_lag_gain: tuple[float, float, float] = (1.21, 1.27, 1.74)
-    latency_variance: float = 6.5e-07
+    twist_variance: tuple[float, float, float] = (2.02e-06, 1.65e-06, 9.97e-06)
+    twist_slip_gain: tuple[float, float, float] = (0.359, 0.375, 6.02)
+    twist_lag_gain: tuple[float, float, float] = (0.632, 0.697, 0.991)
+    latency_variance: float = 3.99e-05
 
 
 class Odometry:
