@@ -149,7 +149,7 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "Arm the motors at start. Default false: motors start disarmed and "
               "~/enable arms them.", default=False),
     # defaults: the XR4000's all-floor profile on the drive model (config/xr4000.yaml):
-    # holonomic-odometry-experiment --robot xr4000 --seeds 6 --duration 40 --condition
+    # holonomic-odometry-experiment --robot xr4000 --seeds 10 --duration 40 --condition
     # drives-nominal --condition drives-uneven --condition drives-slippery --condition
     # drives-worn --calibrate (docs/odometry_experiment.md)
     ParamSpec("odometry.twist_window", "double",
@@ -168,25 +168,26 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("odometry.slip_position_gain", "double",
               "Position variance added per squared RMS contact residual the estimator could "
               "not explain, per second [s] (m^2 per (m/s)^2 s).",
-              default=0.236, minimum=0.0, maximum=1e4),
+              default=0.193, minimum=0.0, maximum=1e4),
     ParamSpec("odometry.slip_heading_gain", "double",
               "Heading variance added per squared RMS contact residual, per second [s/m^2] "
               "(rad^2 per (m/s)^2 s).", default=2.81, minimum=0.0, maximum=1e6),
     ParamSpec("odometry.latency_variance", "double",
-              "Mean square of the readings' latency [s^2]: the published pose covariance "
-              "adds latency_variance x u u^T, u the current twist in odom (the pose error of "
-              "a delay, which does not accumulate).", default=6.5e-07, minimum=0.0, maximum=1.0),
+              "Mean square of the readings' latency (how much older a reading is than its "
+              "stamp) [s^2]: the published pose covariance adds latency_variance x u u^T, u "
+              "the current twist in odom (the pose error of a delay, which does not "
+              "accumulate).", default=3.99e-05, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
               "[(m/s)^2, (m/s)^2, (rad/s)^2].",
-              default=(7.51e-06, 5.89e-06, 3.48e-05), minimum=0.0, maximum=100.0, min_length=3),
+              default=(2.02e-06, 1.65e-06, 9.97e-06), minimum=0.0, maximum=100.0, min_length=3),
     ParamSpec("odometry.twist_slip_gain", "double_array",
               "Twist variance (vx, vy, wz) added per (m/s)^2 of squared RMS contact residual "
-              "[-, -, 1/m^2].", default=(0.285, 0.327, 6.17), minimum=0.0, maximum=1e4,
+              "[-, -, 1/m^2].", default=(0.359, 0.375, 6.02), minimum=0.0, maximum=1e4,
               min_length=3),
     ParamSpec("odometry.twist_lag_gain", "double_array",
               "Twist variance (vx, vy, wz) added per squared lag error of the axis, "
-              "(acceleration x half the twist window)^2 [-].", default=(1.21, 1.27, 1.74),
+              "(acceleration x half the twist window)^2 [-].", default=(0.632, 0.697, 0.991),
               minimum=0.0, maximum=1e4, min_length=3),
     ParamSpec("diagnostics.slip_threshold", "double",
               "Odometry residual of one caster above which it counts as slipping [m/s].",

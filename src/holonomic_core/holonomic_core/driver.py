@@ -73,7 +73,10 @@ class JointReading:
     """One sample of every joint.
 
     ``stamp`` [s] is on the driver's clock: simulated time for the simulator,
-    ``time.monotonic()`` for hardware. ``efforts`` may be NaN where unknown.
+    ``time.monotonic()`` for hardware; it is the time the positions and
+    velocities describe (their sample time: a SYNC, a CAN frame's arrival, the
+    simulated drives' feedback delay before now), not the time the loop
+    received them. ``efforts`` may be NaN where unknown.
     """
 
     stamp: float
@@ -84,7 +87,8 @@ class JointReading:
 
 @dataclass(frozen=True)
 class GroundTruth:
-    """True planar pose and body twist of base_link (simulation only).
+    """True planar pose and body twist of base_link at ``stamp`` [s]
+    (simulation only; the stamp of the newest reading, so the two pair up).
 
     Pose ``(x, y, yaw)`` [m, m, rad] relative to base_link's pose at start
     (the ``odom`` frame); twist ``(vx, vy, wz)`` in base_link.

@@ -60,9 +60,10 @@ class OdometryNoise:
     ``slip_heading_gain`` [s/m^2]. They make the covariance scale with the
     slip level (sigma ~ rho), which a term linear in rho does not.
 
-    Latency, a term that does not accumulate: the readings are older than
-    their stamps (the drive's feedback and bus delays), so the published
-    pose is where the base was a time
+    Latency, a term that does not accumulate: a reading older than its
+    stamp (a delay its driver does not know of: a drive's filter, a reading
+    stamped when it arrived rather than when it was sampled) puts the
+    published pose where the base was a time
     ``tau`` before the stamp, off from the true pose by ``tau * u`` with
     ``u = (R(yaw) (vx, vy), wz)`` the current twist in odom. With ``tau``
     unknown but of variance ``latency_variance`` [s^2] (its mean square: a
@@ -84,12 +85,12 @@ class OdometryNoise:
     linear_variance_per_meter: float = 0.0
     angular_variance_per_radian: float = 0.0
     angular_variance_per_meter: float = 0.0
-    slip_position_gain: float = 0.236
+    slip_position_gain: float = 0.193
     slip_heading_gain: float = 2.81
-    twist_variance: tuple[float, float, float] = (7.51e-06, 5.89e-06, 3.48e-05)
-    twist_slip_gain: tuple[float, float, float] = (0.285, 0.327, 6.17)
-    twist_lag_gain: tuple[float, float, float] = (1.21, 1.27, 1.74)
-    latency_variance: float = 6.5e-07
+    twist_variance: tuple[float, float, float] = (2.02e-06, 1.65e-06, 9.97e-06)
+    twist_slip_gain: tuple[float, float, float] = (0.359, 0.375, 6.02)
+    twist_lag_gain: tuple[float, float, float] = (0.632, 0.697, 0.991)
+    latency_variance: float = 3.99e-05
 
 
 class Odometry:

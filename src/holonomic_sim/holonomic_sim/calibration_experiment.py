@@ -46,8 +46,8 @@ FAULTS = {
 #: loops impose the configured kinematics on the joints and the floor takes
 #: the conflict as slip, so the joints alone cannot show the error); the
 #: DDROT has no conflict to hide (three joints, three degrees of freedom)
-# On the simulator's default drive model (its readings feedback_delay old:
-# the reference is taken at the instant they were sampled, truth_at_samples).
+# On the simulator's default drive model the readings are feedback_delay old
+# and stamped with their sample time; the ground truth comes at that stamp.
 CALIBRATION_DRIVE = {"pcv": {"control_mode": "torque"}, "ddrot": {}}
 #: the issue's targets: relative error of lengths, absolute error of zeros [rad]
 TARGETS = {("pcv", "radius"): 0.002, ("pcv", "offset"): 0.02, ("pcv", "zero"): math.radians(0.2),
@@ -72,8 +72,7 @@ def calibration_run(robot: str, sim_seed: int, duration: float = 60.0,
         run = simulate(robot, sim_seed, duration,
                        overrides={**faults, **drive, "sim.seed": sim_seed},
                        calibration=overlay)
-        samples = samples_from_readings(run.stamps, run.positions,
-                                        truth_at_samples(run, feedback_delay(run.config)))
+        samples = samples_from_readings(run.stamps, run.positions, run.truth)
         result = calibrate(run.config.model, samples, reference)
         overlay = result.overlay()
     fam = result.family
@@ -151,34 +150,6 @@ def reference_drive(robot: str, sim_seed: int, distance: float = 5.0, turns: flo
     return ReferenceDrive(cfg, np.array(stamps), np.array(readings), hidden, float(forward),
                           float(lateral), abs(float(turned[-1] - turned[0])) / (2 * math.pi),
                           float(heading))
-
-
-def feedback_delay(config) -> float:
-    """How old [s] the simulator's joint readings are: the drive model's
-    ``sim.drive.feedback_delay`` rounded to physics steps (as the drives
-    round it), 0 on ideal motors."""
-    values = config.values
-    if values["sim.ideal_motors"]:
-        return 0.0
-    dt = 1.0 / values["sim.physics_rate"]
-    return round(values["sim.drive.feedback_delay"] / dt) * dt
-
-
-def truth_at_samples(run, delay: float) -> np.ndarray:
-    """The true poses (N x 3) [m, m, rad] at the instants the joint readings
-    were sampled: ``delay`` [s] before their stamps (the drives' feedback
-    delay), interpolated between the recorded truths (yaw unwrapped), held at
-    the first one before the record starts. Without this the reference leads
-    the joints by the delay: a HAMR 30 s drive then leaves the radii 0.16 %
-    and the separation 0.34 % off (0.03 % each aligned, or with no delay)."""
-    if delay <= 0.0:
-        return run.truth
-    t = np.asarray(run.stamps, float)
-    truth = np.asarray(run.truth, float)
-    yaw = np.unwrap(truth[:, 2])
-    at = t - delay
-    return np.column_stack([np.interp(at, t, truth[:, 0]), np.interp(at, t, truth[:, 1]),
-                            np.interp(at, t, yaw)])
 
 
 #: the odometry experiment's condition of the before/after runs: nominal

@@ -31,7 +31,9 @@ returns and feeds back the joint states. Per joint:
 * **command delay** and **feedback delay** [s] (bus transfer and the drive's
   cycle; rounded to whole physics steps): a command takes effect
   ``command_delay`` after it is written; the positions and velocities the
-  driver reads are ``feedback_delay`` old.
+  driver reads are ``feedback_delay`` old (:attr:`DriveBank.feedback_steps_recorded`),
+  and the driver stamps them with the time they were sampled, as a real
+  driver stamps a reading with its SYNC or CAN receive time.
 * **encoder resolution**: the positions the driver reads are whole counts of
   ``counts_per_turn`` per joint revolution (motor counts times gear ratio).
 * **friction**: viscous ``-b v`` is added to the torque here; Coulomb
@@ -255,6 +257,18 @@ class DriveBank:
         returns), kept as they are: unpacked only when :meth:`feedback` reads
         them, at the control rate."""
         self._history.append(states)
+
+    @property
+    def feedback_steps(self) -> int:
+        """``feedback_delay`` in whole physics steps [-]."""
+        return self._fb_steps
+
+    @property
+    def feedback_steps_recorded(self) -> int:
+        """How many physics steps old the states :meth:`feedback` returns are:
+        :attr:`feedback_steps` once that many are recorded (before, the oldest
+        recorded)."""
+        return len(self._history) - 1
 
     def feedback(self) -> tuple[np.ndarray, np.ndarray]:
         """Positions [rad] (whole encoder counts) and speeds [rad/s] as the

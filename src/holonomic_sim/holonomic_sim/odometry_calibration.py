@@ -305,23 +305,59 @@ def _natural(bases: np.ndarray, err2: np.ndarray) -> np.ndarray:
     return _present(bases) * err2.mean() / np.maximum(bases.mean(axis=0), 1e-300)
 
 
-def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
+def _held_out_fits(samples: Samples, fit_one) -> np.ndarray | None:
+    """Per sample, ``fit_one(mask)`` (a fit on the samples of ``mask``)
+    evaluated on the run the sample belongs to, fitted on the *other* runs:
+    ``fit_one(train)`` returns a function of the held-out mask. None with
+    fewer than :data:`PREDICTIVE_RUNS` runs."""
+    runs = samples.runs
+    if len(runs) < PREDICTIVE_RUNS:
+        return None
+    out = None
+    for run in runs:
+        held = samples.run == run
+        values = fit_one(~held)(held)
+        if out is None:
+            out = np.empty((len(samples.run),) + values.shape[1:])
+        out[held] = values
+    return out
+
+
+#: fewest runs of one floor for the scale to be set on held-out runs
+PREDICTIVE_RUNS = 3
+
+
+def fit(samples: Samples, start: OdometryNoise, predictive: bool = True) -> OdometryNoise:
     """Coefficients of OdometryNoise calibrated on ``samples``.
 
     One floor (slip condition) in the samples: the likelihood fit, scaled
-    so that 95 % of the samples lie in the 95 % region. Several floors: the
-    pose terms' mix searched so that every floor comes closest to 95 %
-    (:func:`_coverage_search`); the twist keeps the scaled likelihood fit
-    (its errors are the filter's lag, alike on every floor).
+    so that 95 % of the samples lie in the 95 % region -- with
+    ``predictive`` (and at least :data:`PREDICTIVE_RUNS` runs) 95 % of the
+    samples of *unseen* runs: the scale is the one at which each run,
+    against the likelihood fit of the other runs, is covered 95 % of the
+    time (pooled). Scaled on the runs it was fitted to, a profile is
+    optimistic on the next run: runs of one floor differ (each seed draws
+    its wheels' friction, radii and drives), and a run whose errors are
+    larger than the others' falls far below 95 % while a smaller one cannot
+    rise above 100 %. Several floors: the pose terms' mix searched so that
+    every floor comes closest to 95 % (:func:`_coverage_search`); the twist
+    keeps the scaled likelihood fit (its errors are the filter's lag, alike
+    on every floor, and nearly independent from sample to sample).
     """
     e = samples.error
     g = samples.condition
     several = len(set(g.tolist())) > 1
+    predictive = predictive and not several
     # heading: P22 = sum_k c_k B_k22
     h_bases = np.stack([samples.bases[k][:, 2, 2] for k in HEADING_KEYS], axis=1)
 
-    h = _fit_variances(h_bases, e[:, 2] ** 2) * _present(h_bases)
-    hvar = h_bases @ h
+    present = _present(h_bases)
+    h = _fit_variances(h_bases, e[:, 2] ** 2) * present
+    hvar = _held_out_fits(samples, lambda train: (
+        lambda held, c=_fit_variances(h_bases[train], e[train, 2] ** 2) * present:
+        h_bases[held] @ c)) if predictive else None
+    if hvar is None:
+        hvar = h_bases @ h
     s = _scale_to_coverage(lambda f: np.abs(e[:, 2]) <= Z_95 * np.sqrt(f * hvar), g)
     h = h * s
     if several:
@@ -333,9 +369,17 @@ def fit(samples: Samples, start: OdometryNoise) -> OdometryNoise:
     p_bases = [samples.bases[k][:, :2, :2] for k in POSITION_KEYS]
 
     traces = np.stack([b[:, 0, 0] + b[:, 1, 1] for b in p_bases], axis=1)
-    p = _fit_covariances(fixed, p_bases, e[:, :2]) * _present(traces)
-    s = _scale_to_coverage(lambda f: mahalanobis2(
-        e[:, :2], fixed + f * sum(ci * b for ci, b in zip(p, p_bases))) <= CHI2_2_95, g)
+    present = _present(traces)
+    p = _fit_covariances(fixed, p_bases, e[:, :2]) * present
+
+    def position_fit(train):
+        c = _fit_covariances(fixed[train], [b[train] for b in p_bases], e[train, :2]) * present
+        return lambda held: sum(ci * b[held] for ci, b in zip(c, p_bases))
+
+    pcov = _held_out_fits(samples, position_fit) if predictive else None
+    if pcov is None:
+        pcov = sum(ci * b for ci, b in zip(p, p_bases))
+    s = _scale_to_coverage(lambda f: mahalanobis2(e[:, :2], fixed + f * pcov) <= CHI2_2_95, g)
     p = p * s
     if several:
         p = _coverage_search(lambda c: mahalanobis2(

@@ -347,7 +347,8 @@ def _die_with_parent() -> None:
 def _write_state(driver, state_fd: int, record: np.ndarray, layout: StateLayout,
                  reading, fault: bool) -> None:
     record[_FLAGS] = 1.0 if fault else 0.0
-    record[_STAMP] = driver.sim_time()
+    # a reading's own stamp: the time it describes (the drives' feedback delay)
+    record[_STAMP] = driver.sim_time() if reading is None else reading.stamp
     if reading is not None:
         record[layout.positions()] = reading.positions
         record[layout.velocities()] = reading.velocities

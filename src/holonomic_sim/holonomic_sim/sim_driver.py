@@ -147,15 +147,17 @@ class InProcessPlant:
         # the encoders report the angle plus their zero's error and the
         # configured offset, which the controller subtracts again
         positions = positions + self._reading_offset
-        # the reading's stamp: the sim time [s] after this period's steps
-        return JointReading(self.world.time, positions, velocities, efforts)
+        # the reading's stamp: the time the positions describe [s, sim time]
+        # (a drive's feedback is feedback_delay old), as the CAN drivers stamp theirs
+        return JointReading(self.robot.sample_time, positions, velocities, efforts)
 
     @property
     def sim_time(self) -> float:
         return self.world.time
 
     def ground_truth(self) -> GroundTruth:
-        return GroundTruth(self.world.time, self.robot.pose(), self.robot.body_twist())
+        # at the newest reading's stamp: the truth that goes with it
+        return GroundTruth(self.robot.sample_time, *self.robot.sampled_truth())
 
     def wheel_contacts(self) -> tuple[np.ndarray, np.ndarray]:
         return self.robot.wheel_contacts()

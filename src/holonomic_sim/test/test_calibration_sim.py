@@ -49,23 +49,6 @@ def test_ddrot_geometry_is_recovered_against_ground_truth():
     assert _worst(result, errors, "zero") < math.radians(0.02)
 
 
-def test_the_reference_is_taken_where_the_delayed_readings_were_sampled():
-    # readings stamped 0, 10, 20 ms but 5 ms old: the truth half-way between
-    # the recorded ones (held at the first before the record), yaw across +-pi
-    # interpolated on the unwrapped angle (3.1 -> -3.1 is +0.083 rad, not -6.2)
-    from types import SimpleNamespace
-
-    from holonomic_sim.calibration_experiment import truth_at_samples
-    run = SimpleNamespace(stamps=np.array([0.0, 0.01, 0.02]),
-                          truth=np.array([[0.0, 0.0, 3.1], [1.0, -2.0, -3.1], [2.0, -4.0, -3.0]]))
-    aligned = truth_at_samples(run, 0.005)
-    step = 2 * math.pi - 6.2                                   # 3.1 -> -3.1 unwrapped
-    assert aligned[:, 0] == pytest.approx([0.0, 0.5, 1.5])
-    assert aligned[:, 1] == pytest.approx([0.0, -1.0, -3.0])
-    assert aligned[:, 2] == pytest.approx([3.1, 3.1 + step / 2, 3.1 + step + 0.05])
-    assert truth_at_samples(run, 0.0) is run.truth
-
-
 @pytest.fixture(scope="module")
 def hamr_reference_drive():
     # hidden: radii +-2 %, separation +-2 %, turret zero +-3 deg (sim.seed 2);

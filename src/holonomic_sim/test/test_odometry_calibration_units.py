@@ -68,3 +68,52 @@ def test_a_basis_at_rounding_level_gets_no_coefficient():
     assert _present(bases).tolist() == [1.0, 0.0]
     # column 0: mean(err2) / mean(basis) = 0.75 / 1.5
     assert _natural(bases, err2).tolist() == [0.5, 0.0]
+
+
+def _one_floor(k_per_run, samples_per_run=10):
+    """Synthetic samples of one floor: run r's heading error is k_r sqrt(t)
+    and its position error (k_r sqrt(t), 0), against the bases t (heading,
+    angular_variance_per_radian) and t I (position, linear_variance_per_meter),
+    t = 1..samples_per_run; every other basis 0 (absent)."""
+    from holonomic_sim.odometry_calibration import HEADING_KEYS, POSITION_KEYS, Samples
+    t = np.arange(1.0, samples_per_run + 1.0)
+    parts = []
+    for r, k in enumerate(k_per_run):
+        bases = {key: np.zeros((len(t), 3, 3)) for key in HEADING_KEYS + POSITION_KEYS}
+        bases["angular_variance_per_radian"][:, 2, 2] = t
+        bases["linear_variance_per_meter"][:, 0, 0] = t
+        bases["linear_variance_per_meter"][:, 1, 1] = t
+        error = np.column_stack([k * np.sqrt(t), np.zeros_like(t), k * np.sqrt(t)])
+        parts.append({"condition": np.array(["floor"] * len(t)),
+                      "run": np.array([f"floor seed {r}"] * len(t)), "error": error,
+                      "twist_error": np.full((len(t), 3), 0.01), "bases": bases,
+                      "slip_basis": np.zeros((len(t), 3)), "lag_basis": np.zeros((len(t), 3))})
+    samples = Samples.__new__(Samples)
+    samples._pool(parts)
+    return samples
+
+
+def test_a_floor_profile_is_scaled_for_the_next_run_not_the_runs_it_saw():
+    # four runs, error sizes k = 1, 1, 1, 2 (one seed's wheels slip more).
+    # The likelihood fit of a variance c t to errors k sqrt(t) is c = mean(k^2):
+    # 7/4 over all runs; the position's c t I to (k sqrt(t), 0): mean(k^2) / 2.
+    # Every sample of a run has the same |e| / sigma, so 95 % of 4 equal runs
+    # needs all 4 inside: heading k^2 <= 1.96^2 c, position k^2 <= 5.991 c.
+    from holonomic_sim.odometry_calibration import fit
+    from holonomic_core.odometry import OdometryNoise
+    samples = _one_floor([1.0, 1.0, 1.0, 2.0])
+    start = OdometryNoise()
+    seen = fit(samples, start, predictive=False)
+    # scaled on the runs it saw: the k = 2 run decides, c = 4 / 1.96^2, 4 / 5.991
+    assert seen.angular_variance_per_radian == pytest.approx(4.0 / 1.96 ** 2, rel=1e-6)
+    assert seen.linear_variance_per_meter == pytest.approx(4.0 / 5.991, rel=1e-6)
+    nxt = fit(samples, start)
+    # for the next run: fitted on the other three, the k = 2 run sees c = 1
+    # (heading) and 1/2 (position), so the scale is 4 / 1.96^2 and 8 / 5.991,
+    # applied to the fit over all four runs (7/4, 7/8): 7 / 1.96^2, 7 / 5.991
+    assert nxt.angular_variance_per_radian == pytest.approx(7.0 / 1.96 ** 2, rel=1e-6)
+    assert nxt.linear_variance_per_meter == pytest.approx(7.0 / 5.991, rel=1e-6)
+    # two runs are too few to hold one out of the fit: scaled on what it saw
+    two = _one_floor([1.0, 2.0])
+    assert fit(two, start).angular_variance_per_radian == pytest.approx(
+        fit(two, start, predictive=False).angular_variance_per_radian)
