@@ -380,8 +380,9 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     before the control law (`BaseController.step(take_command)`), not at the start of the
     cycle. So the end-to-end p50 is about DDS one-way + 0.04 ms + 0.5 ms, and **the floor
     of a fixed-period 1 kHz loop is DDS one-way + half a period**: the ratio can reach 2×
-    only where DDS one-way is above about 0.55 ms (0.35 ms on this machine when idle:
-    a floor of about 2.6×). Running an extra control cycle when a command arrives would
+    only where DDS one-way is above about 0.55 ms. On this machine DDS one-way p50 has
+    measured 0.35-0.97 ms from run to run (floors of 1.5-2.5×), so the verdict of the row
+    above holds for its run only: earlier runs gave 2.03-2.4×. Running an extra control cycle when a command arrives would
     remove the wait and break the fixed period the limiter, the odometry, the torque law
     and the drives' SYNC and watchdogs are built on; it is not done;
   * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz; on a loaded
