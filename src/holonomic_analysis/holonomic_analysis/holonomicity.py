@@ -17,7 +17,9 @@ limits and the joint-speed saturation, exactly as for a teleop command --
 so the DDROT swings its drive base and the PCV its casters as the inverse
 kinematics dictate, and their time to do so is in t.
 
-Two plants: ``sim`` (pybullet, ground-truth pose) and ``mock`` (ideal joints:
+Two plants: ``sim`` (pybullet, ground-truth pose at the readings' sample
+time: with the drive model that is its feedback delay old, a steering latency
+like a motion-capture system's) and ``mock`` (ideal joints:
 the pose is the odometry of the commanded joint motion, i.e. the exact
 kinematics). With ``mock`` and unbounded acceleration the measured H tends to
 ``H_hat`` as ``d_T`` shrinks, as the paper says; with acceleration limits it

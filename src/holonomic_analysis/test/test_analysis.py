@@ -312,13 +312,16 @@ def test_a_simulated_move_takes_the_time_the_limits_allow_and_stops_on_target():
 @pytest.mark.parametrize("heading", [0.0, PI / 2])
 def test_a_simulated_move_on_the_drive_model_stops_on_target(heading):
     # Drives tuned on the floor (sim.drive.tuned_on): both moves stop within
-    # 1 cm / 1 deg, measured 1.90 s each (6.3 / 6.1 mm, 0.40 / 0.27 deg), 8 %
-    # over the ideal plant's 1.764 s: the drives' lag (7 ms of delays, a 40 Hz
-    # loop) at the approach. With the default drives (tuned lifted, ~2 Hz on
-    # the floor) the lateral move limit-cycles (heading ~9 deg off after 20 s).
+    # 1 cm / 1 deg, measured 2.015 / 2.030 s (0.8 / 0.3 mm, 0.51 / 0.33 deg),
+    # 14-15 % over the ideal plant's 1.764 s: the drives' lag (7 ms of delays,
+    # a 40 Hz loop) at the approach, and the move is steered on the ground
+    # truth at the readings' sample time, 5 ms old (like a motion-capture
+    # system's latency; 1.90 s each when the truth was the current one). With
+    # the default drives (tuned lifted, ~2 Hz on the floor) the lateral move
+    # limit-cycles (heading ~9 deg off after 20 s).
     move = holonomicity.time_move("hamr", heading, 0.0, 1.0, "sim",
                                   overrides={"sim.drive.tuned_on": "floor"})
-    assert move.seconds < 1.764 * 1.15
+    assert move.seconds < 1.764 * 1.25
     assert move.position_error < 0.01 and move.heading_error < math.radians(1)
 
 
