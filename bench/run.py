@@ -365,11 +365,15 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   * *the XR4000 in torque mode*: with the physics in the loop process, pybullet and the drive
     model step inside each cycle (the `controller` part); with `sim.physics_process` (its own
     rows) the physics runs in a process of its own (SCHED_FIFO 49 below a real-time loop), as
-    the plant does on a robot, and the cycle is the operational-space torque law (87 µs a call
-    since it runs on floats instead of small numpy arrays: `python bench/torque_law.py`). With
-    SCHED_FIFO the remaining periods over 2 ms of both rows are single `compute` spikes of
-    12-17 ms in the controller part (one or two a minute; not traced: the process has no page
-    faults, its collector is off); without real-time priority three 1 kHz processes (loop,
+    the plant does on a robot, and the cycle is the operational-space torque law (33 µs a call
+    with its dynamics compiled, 83 µs on the pure-Python path: `python bench/torque_law.py`).
+    The 12-17 ms `compute` spike these rows had once or twice a minute is gone: numpy's BLAS
+    mapped its 32 MiB work buffer in the drift watch's first batch, 8192 page faults under
+    mlockall inside one cycle; the loop process now sets BLAS up before its first cycle, works
+    a drift batch off over four cycles, and runs its once-a-second status and collector in
+    different cycles (docs/realtime.md; the loop's status keeps its page faults and its slowest
+    cycle with its parts: `slowest_*` in the split). With SCHED_FIFO the remaining periods over
+    2 ms are mostly woken late; without real-time priority three 1 kHz processes (loop,
     physics, node) share two cores;
   * *command latency* (its stages: `python bench/run.py --only latency` prints them and puts
     them under the table; docs/realtime.md, "The command's way to the control law"): DDS itself (write to reception in the node's process)
