@@ -101,6 +101,19 @@ class RobotLink:
         return True
 
 
+def loop_environment() -> dict[str, str]:
+    """The loop process's environment: this one's, with numpy's OpenBLAS
+    single-threaded unless the user chose otherwise. OpenBLAS starts a pool of
+    worker threads when numpy is imported, on the normal scheduler; a
+    real-time loop that handed them a matrix product large enough to split
+    would wait for threads any other process can preempt (a priority
+    inversion). The cycle's matrices are small: one thread does them. The
+    simulator's physics process inherits this environment."""
+    env = dict(os.environ)
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    return env
+
+
 class LoopClient:
     """Runs a control loop host for ``setups`` (flat configs) in a process
     of its own (``process``) or a thread; see the module docstring."""
@@ -162,7 +175,7 @@ class LoopClient:
             self._proc = subprocess.Popen(
                 [sys.executable, "-m", "holonomic_bringup.loop_host",
                  str(theirs.fileno()), str(beat_fd)],
-                pass_fds=fds, start_new_session=True)
+                pass_fds=fds, start_new_session=True, env=loop_environment())
             wire.send(ours, setup)         # read by the host at start
             theirs.close()
             for fd in self._host_fds:

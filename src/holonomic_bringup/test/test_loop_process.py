@@ -100,6 +100,31 @@ def test_the_first_cycle_after_a_command_is_written_takes_it_after_its_reading()
 _STATE_INDEX = {s: k for k, s in enumerate(ControllerState)}
 
 
+@pytest.mark.parametrize("users, expected", [(None, "1"), ("2", "2")])
+def test_the_loop_process_runs_numpys_blas_single_threaded_unless_the_user_chose(
+        monkeypatch, users, expected):
+    # OpenBLAS's worker threads run on the normal scheduler: a real-time
+    # loop must not wait for them (loop_client.loop_environment); a user's
+    # own OPENBLAS_NUM_THREADS is kept
+    from holonomic_bringup.loop_client import LoopClient
+    from holonomic_core.config import read_params_file, resolve_config
+
+    if users is None:
+        monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    else:
+        monkeypatch.setenv("OPENBLAS_NUM_THREADS", users)
+    path = resolve_config("hamr")
+    flat = read_params_file(path)
+    flat.update({"driver": "mock", "loop.realtime": False})
+    client = LoopClient([(flat, str(path), load_config("hamr", {"driver": "mock"}).model)])
+    client.start()
+    try:
+        environ = Path(f"/proc/{client.pid}/environ").read_bytes().split(b"\0")
+    finally:
+        client.stop()
+    assert f"OPENBLAS_NUM_THREADS={expected}".encode() in environ
+
+
 def test_a_fault_raised_from_outside_disarms_and_the_first_cause_stays():
     ctrl, clock = _controller()
     ctrl.request_enable(True)
