@@ -102,6 +102,10 @@ ODOMETRY_EXPERIMENT = [
     (["--condition", "wet"], "expected one of nominal, uneven, slippery, worn"),
     (["--json", "{file}/x/trials.json"], "--json: cannot write"),
     (["--profiles", "out"], "--profiles needs --calibrate"),
+    (["--default-floor", "worn"], "--default-floor needs --calibrate"),
+    (["--calibrate", "--condition", "uneven", "--default-floor", "worn"],
+     "--default-floor 'worn tyres (r +-2 %)' is not among the --condition runs"),
+    (["--calibrate", "--default-floor", "wet"], "expected one of nominal, uneven"),
     (["--calibrate", "--profiles", "{file}/x"], "--profiles: cannot create the folder"),
     (["--recordings", "{file}/x"], "--recordings: cannot create the folder"),
 ]

@@ -420,10 +420,13 @@ done:
 /* The pose composition and covariance growth; mirrors compose_arc and
    Odometry._integrate. pose[3] is updated in place; P[6] is the upper
    triangle; noise = (linear/m, angular/rad, angular/m, slip position gain,
-   slip heading gain). Returns the distance [m]. */
+   slip heading gain, slip4 position gain, slip4 heading gain); slip2 = rho^2.
+   Returns the distance [m]. */
 static double
-integrate_into(double *pose, double *P, const double *disp, double slip2_dt, const double *noise)
+integrate_into(double *pose, double *P, const double *disp, double slip2, double dt,
+               const double *noise)
 {
+    double slip2_dt = slip2 * dt, slip4_dt = slip2_dt * slip2;
     double dx = disp[0], dy = disp[1], dth = disp[2];
     double x = pose[0], y = pose[1], heading = pose[2];
     double a, b;
@@ -442,8 +445,9 @@ integrate_into(double *pose, double *P, const double *disp, double slip2_dt, con
     pose[1] = y + wy;
     pose[2] = remainder(heading + dth, TWO_PI);    /* exact, as math.remainder */
     double dist = hypot(dx, dy);
-    double var_lin = noise[0] * dist + noise[3] * slip2_dt;
-    double var_ang = noise[1] * fabs(dth) + noise[2] * dist + noise[4] * slip2_dt;
+    double var_lin = noise[0] * dist + noise[3] * slip2_dt + noise[5] * slip4_dt;
+    double var_ang = noise[1] * fabs(dth) + noise[2] * dist + noise[4] * slip2_dt
+        + noise[6] * slip4_dt;
     /* no shortcut when the step adds no noise: F P F^T still swings the
        heading variance already accumulated into the position */
     double fa = -wy, fb = wx;
@@ -529,7 +533,7 @@ odometry_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (q_a == NULL)
         goto done;
     n_a = as_vector(args[7], "noise");
-    if (n_a == NULL || need_length(n_a, 5, "noise") < 0)
+    if (n_a == NULL || need_length(n_a, 7, "noise") < 0)
         goto done;
     npy_intp nq = PyArray_DIM(q_a, 0);
     if (nq > 2 * MAX_CASTERS || PyArray_DIM(g_a, 0) > 4 * MAX_CASTERS) {
@@ -581,7 +585,7 @@ odometry_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         goto done;
     for (int i = 0; i < 3; i++)
         disp[i] = tw[i] * dt;
-    double dist = integrate_into(PyArray_DATA(pose), P, disp, slip * slip * dt,
+    double dist = integrate_into(PyArray_DATA(pose), P, disp, slip * slip, dt,
                                  PyArray_DATA(n_a));
     out = Py_BuildValue("(OOOd(dddddd)dO)", tw_o, res_o, disp_o, slip,
                         P[0], P[1], P[2], P[3], P[4], P[5], dist, copy_o);

@@ -148,10 +148,12 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("enable_on_start", "bool",
               "Arm the motors at start. Default false: motors start disarmed and "
               "~/enable arms them.", default=False),
-    # defaults: the XR4000's all-floor profile on the drive model (config/xr4000.yaml):
-    # holonomic-odometry-experiment --robot xr4000 --seeds 10 --duration 40 --condition
-    # drives-nominal --condition drives-uneven --condition drives-slippery --condition
-    # drives-worn --calibrate (docs/odometry_experiment.md)
+    # defaults: the XR4000's profile on the drive model for the floors of a robot with
+    # calibrated wheel radii (config/xr4000.yaml): holonomic-odometry-experiment --robot
+    # xr4000 --seeds 12 --duration 40 --condition drives-nominal --condition drives-uneven
+    # --condition drives-slippery --condition drives-worn --default-floor drives-nominal
+    # --default-floor drives-uneven --default-floor drives-slippery --calibrate
+    # (docs/odometry_experiment.md)
     ParamSpec("odometry.twist_window", "double",
               "Span of the encoder readings whose least-squares line gives the published "
               "twist [s]; it lags a ramp by half of it; 0: the last two readings.",
@@ -168,26 +170,33 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("odometry.slip_position_gain", "double",
               "Position variance added per squared RMS contact residual the estimator could "
               "not explain, per second [s] (m^2 per (m/s)^2 s).",
-              default=0.193, minimum=0.0, maximum=1e4),
+              default=0.0, minimum=0.0, maximum=1e4),
     ParamSpec("odometry.slip_heading_gain", "double",
               "Heading variance added per squared RMS contact residual, per second [s/m^2] "
-              "(rad^2 per (m/s)^2 s).", default=2.81, minimum=0.0, maximum=1e6),
+              "(rad^2 per (m/s)^2 s).", default=0.0, minimum=0.0, maximum=1e6),
+    ParamSpec("odometry.slip4_position_gain", "double",
+              "Position variance added per fourth power of the RMS contact residual, per "
+              "second [s^3/m^2] (m^2 per (m/s)^4 s): the slip no residual shows grows faster "
+              "than the residual when the tyres slide.", default=166.0, minimum=0.0, maximum=1e8),
+    ParamSpec("odometry.slip4_heading_gain", "double",
+              "Heading variance added per fourth power of the RMS contact residual, per "
+              "second [s^3/m^4] (rad^2 per (m/s)^4 s).", default=1010.0, minimum=0.0, maximum=1e10),
     ParamSpec("odometry.latency_variance", "double",
               "Mean square of the readings' latency (how much older a reading is than its "
               "stamp) [s^2]: the published pose covariance adds latency_variance x u u^T, u "
               "the current twist in odom (the pose error of a delay, which does not "
-              "accumulate).", default=3.99e-05, minimum=0.0, maximum=1.0),
+              "accumulate).", default=0.0, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
               "[(m/s)^2, (m/s)^2, (rad/s)^2].",
-              default=(2.02e-06, 1.65e-06, 9.97e-06), minimum=0.0, maximum=100.0, min_length=3),
+              default=(1.88e-06, 1.46e-06, 7.61e-06), minimum=0.0, maximum=100.0, min_length=3),
     ParamSpec("odometry.twist_slip_gain", "double_array",
               "Twist variance (vx, vy, wz) added per (m/s)^2 of squared RMS contact residual "
-              "[-, -, 1/m^2].", default=(0.359, 0.375, 6.02), minimum=0.0, maximum=1e4,
+              "[-, -, 1/m^2].", default=(0.426, 0.388, 7.43), minimum=0.0, maximum=1e4,
               min_length=3),
     ParamSpec("odometry.twist_lag_gain", "double_array",
               "Twist variance (vx, vy, wz) added per squared lag error of the axis, "
-              "(acceleration x half the twist window)^2 [-].", default=(0.632, 0.697, 0.991),
+              "(acceleration x half the twist window)^2 [-].", default=(0.599, 0.605, 0.944),
               minimum=0.0, maximum=1e4, min_length=3),
     ParamSpec("diagnostics.slip_threshold", "double",
               "Odometry residual of one caster above which it counts as slipping [m/s].",
@@ -273,7 +282,9 @@ class ControllerConfig:
                                 tuple(v["odometry.twist_variance"]),
                                 tuple(v["odometry.twist_slip_gain"]),
                                 tuple(v["odometry.twist_lag_gain"]),
-                                v["odometry.latency_variance"]),
+                                v["odometry.latency_variance"],
+                                v["odometry.slip4_position_gain"],
+                                v["odometry.slip4_heading_gain"]),
             twist_window=v["odometry.twist_window"],
             slip=SlipLimits(v["diagnostics.slip_threshold"], v["diagnostics.slip_duration"]),
             monitor=MonitorLimits(v["safety.velocity_factor"], v["safety.reading_timeout"],

@@ -214,7 +214,8 @@ def _noise(**terms):
     zero = dict(linear_variance_per_meter=0.0, angular_variance_per_radian=0.0,
                 angular_variance_per_meter=0.0, slip_position_gain=0.0, slip_heading_gain=0.0,
                 twist_variance=(0.0, 0.0, 0.0), twist_slip_gain=(0.0, 0.0, 0.0),
-                twist_lag_gain=(0.0, 0.0, 0.0), latency_variance=0.0)
+                twist_lag_gain=(0.0, 0.0, 0.0), latency_variance=0.0, slip4_position_gain=0.0,
+                slip4_heading_gain=0.0)
     zero.update(terms)
     return OdometryNoise(**zero)
 
@@ -378,11 +379,40 @@ def test_the_unexplained_contact_velocity_grows_pose_and_twist_variance():
                                rtol=1e-9)
 
 
+def test_the_fourth_power_slip_terms_grow_sixteenfold_with_twice_the_slip():
+    """The rho^4 terms: one increment from P = 0 adds slip4_position_gain
+    rho^4 dt on x and y and slip4_heading_gain rho^4 dt on the heading, on
+    top of the rho^2 terms; the same wheel error twice as large (twice the
+    residual) adds 4x the rho^2 part and 16x the rho^4 part."""
+    model = load_model("xr4000")
+    noise = _noise(slip_position_gain=0.3, slip_heading_gain=2.0, slip4_position_gain=50.0,
+                   slip4_heading_gain=700.0)
+    wheel = next(i for i, name in enumerate(model.joint_names) if "steer" not in name)
+    added = []
+    for excess in (0.02, 0.04):
+        odo = Odometry(model, noise=noise)
+        q = np.zeros(len(model.joint_names))
+        odo.update(q, 0.0)
+        q[wheel] = excess
+        assert odo.update(q, 0.01) is True
+        rho = odo.slip
+        P = odo.pose_covariance
+        assert P[0, 0] == pytest.approx((0.3 * rho ** 2 + 50.0 * rho ** 4) * 0.01, rel=1e-9)
+        assert P[1, 1] == pytest.approx(P[0, 0], rel=1e-12)
+        assert P[2, 2] == pytest.approx((2.0 * rho ** 2 + 700.0 * rho ** 4) * 0.01, rel=1e-9)
+        added.append((rho, P[2, 2]))
+    (rho1, h1), (rho2, h2) = added
+    assert rho2 == pytest.approx(2.0 * rho1, rel=1e-9)
+    assert h2 == pytest.approx(4.0 * 2.0 * rho1 ** 2 * 0.01 + 16.0 * 700.0 * rho1 ** 4 * 0.01,
+                               rel=1e-9)
+
+
 def test_a_base_without_redundant_joints_has_no_slip_term():
     """HAMR: 3 joints for 3 dof, nothing left to disagree: slip 0, so the slip
     gains add nothing however large."""
     model = load_model("hamr")
     odo = Odometry(model, noise=_noise(slip_position_gain=1e3, slip_heading_gain=1e3,
+                                       slip4_position_gain=1e3, slip4_heading_gain=1e3,
                                        twist_slip_gain=(1e3, 1e3, 1e3)))
     odo.update(np.zeros(3), 0.0)
     drive(model, odo, np.zeros(3), np.array([0.3, 0.1, 0.2]), 0.2)

@@ -17,7 +17,8 @@ from holonomic_core.odometry import Odometry, OdometryNoise
 from test_limits_odometry import drive   # constant body twist -> encoder readings
 
 ZERO = (0.0, 0.0, 0.0)
-LATENCY = OdometryNoise(0.0, 0.0, 0.0, 0.0, 0.0, ZERO, ZERO, ZERO, latency_variance=1e-4)
+LATENCY = OdometryNoise(0.0, 0.0, 0.0, 0.0, 0.0, ZERO, ZERO, ZERO, latency_variance=1e-4,
+                        slip4_position_gain=0.0, slip4_heading_gain=0.0)
 
 
 def test_straight_motion_adds_variance_along_the_motion_only():

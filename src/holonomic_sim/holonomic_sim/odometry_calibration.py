@@ -47,8 +47,8 @@ from holonomic_core.se2 import wrap_angle
 
 #: pose coefficients (OdometryNoise fields), heading-only ones first
 HEADING_KEYS = ("angular_variance_per_radian", "angular_variance_per_meter",
-                "slip_heading_gain", "latency_variance")
-POSITION_KEYS = ("linear_variance_per_meter", "slip_position_gain")
+                "slip_heading_gain", "slip4_heading_gain", "latency_variance")
+POSITION_KEYS = ("linear_variance_per_meter", "slip_position_gain", "slip4_position_gain")
 CHI2_2_95 = 5.991            # 95 % quantile of chi^2 with 2 degrees of freedom
 Z_95 = 1.96
 #: coverage the scale step gives the worst floor (the target band is 90-99.5 %)
@@ -61,7 +61,7 @@ WARM_UP = 1.0                # [s] before the first sample
 
 def _zero_noise(**values) -> OdometryNoise:
     base = OdometryNoise(0.0, 0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
-                        (0.0, 0.0, 0.0), 0.0)
+                         (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
     return replace(base, **values)
 
 
@@ -252,9 +252,11 @@ def _coverage_search(inside, c0: np.ndarray, natural: np.ndarray, groups) -> np.
     ``c0``: the likelihood fit, scaled; ``natural``: per coefficient, the
     value at which its basis alone explains the mean squared error (the
     grid's centre for a coefficient the likelihood drove to 0). Grid: 0 and
-    4 decades around the centre, 2 points per decade (4 coefficients: 10^4
-    points); then each coefficient, and one common scale, refined between
-    1/2 and 2.
+    4 decades around the centre, as many points per axis as keep the grid
+    near :data:`SEARCH_POINTS` (4 coefficients: 2 per decade, 5: 1 per
+    decade); then each coefficient, and one common scale, refined by
+    factors between 1/4 and 4 until no step improves (at most
+    :data:`SEARCH_PASSES` passes).
     """
     labels = list(dict.fromkeys(groups.tolist()))
     masks = [groups == g for g in labels]
@@ -264,7 +266,8 @@ def _coverage_search(inside, c0: np.ndarray, natural: np.ndarray, groups) -> np.
         return _band_loss(np.array([np.mean(hit[m]) for m in masks]))
 
     centre = np.where(c0 > 0.0, c0, natural)
-    axes = [np.concatenate(([0.0], ck * np.logspace(-3.0, 1.0, 9))) for ck in centre]
+    per_axis = max(int(round(SEARCH_POINTS ** (1.0 / len(c0)))) - 1, 2)
+    axes = [np.concatenate(([0.0], ck * np.logspace(-3.0, 1.0, per_axis))) for ck in centre]
     best, best_loss = np.asarray(c0, float), loss(c0)
     for point in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(c0)):
         if not point.any():
@@ -272,8 +275,9 @@ def _coverage_search(inside, c0: np.ndarray, natural: np.ndarray, groups) -> np.
         value = loss(point)
         if value < best_loss:
             best, best_loss = point, value
-    factors = np.geomspace(0.5, 2.0, 17)
-    for _ in range(2):
+    factors = np.geomspace(0.25, 4.0, 17)
+    for _ in range(SEARCH_PASSES):
+        start_loss = best_loss
         for k in range(len(best)):
             for f in factors:
                 point = best.copy()
@@ -285,7 +289,15 @@ def _coverage_search(inside, c0: np.ndarray, natural: np.ndarray, groups) -> np.
             value = loss(best * f)
             if value < best_loss - 1e-15:
                 best, best_loss = best * f, value
+        if best_loss >= start_loss - 1e-15:
+            break
     return np.asarray(best, float)
+
+
+#: about how many points the coverage search's grid has (per axis: its
+#: len(c)-th root), and how many refinement passes follow it at most
+SEARCH_POINTS = 10_000
+SEARCH_PASSES = 6
 
 
 #: a basis whose mean is below this is rounding, not a term of the robot: a
@@ -434,20 +446,22 @@ def held_out(samples: Samples, start: OdometryNoise) -> dict:
     return _pooled(per_run)
 
 
-def held_out_by_seed(samples: Samples, start: OdometryNoise) -> dict:
+def held_out_by_seed(samples: Samples, start: OdometryNoise, fit_floors=None) -> dict:
     """Leave-one-seed-out coverage of the all-floor profile, per floor.
 
-    For each seed, :func:`fit` over every floor's runs of the other seeds,
-    checked on that seed's run of each floor. Returns floor -> the dict of
-    :func:`held_out`.
+    For each seed, :func:`fit` over the runs of the other seeds on every
+    floor in ``fit_floors`` (None: every floor), checked on that seed's run
+    of each floor (also of the floors it was not fitted on). Returns floor
+    -> the dict of :func:`held_out`.
     """
     seeds = sorted({r.rsplit(" seed ", 1)[1] for r in samples.runs})
     if len(seeds) < 2:
         raise ValueError("held-out coverage needs at least 2 seeds")
     per_floor: dict = {}
     for seed in seeds:
-        noise = fit(samples.subset(runs=[r for r in samples.runs
-                                         if not r.endswith(f" seed {seed}")]), start)
+        noise = fit(samples.subset(fit_floors, runs=[r for r in samples.runs
+                                                     if not r.endswith(f" seed {seed}")]),
+                    start)
         for run in samples.runs:
             if run.endswith(f" seed {seed}"):
                 one = samples.subset(runs=[run])
@@ -548,6 +562,8 @@ def noise_yaml(noise: OdometryNoise, twist_window: float) -> str:
         f"      angular_variance_per_meter: {g(noise.angular_variance_per_meter)}",
         f"      slip_position_gain: {g(noise.slip_position_gain)}",
         f"      slip_heading_gain: {g(noise.slip_heading_gain)}",
+        f"      slip4_position_gain: {g(noise.slip4_position_gain)}",
+        f"      slip4_heading_gain: {g(noise.slip4_heading_gain)}",
         f"      twist_variance: [{', '.join(g(v) for v in noise.twist_variance)}]",
         f"      twist_slip_gain: [{', '.join(g(v) for v in noise.twist_slip_gain)}]",
         f"      twist_lag_gain: [{', '.join(g(v) for v in noise.twist_lag_gain)}]",
@@ -655,11 +671,14 @@ def _write_profile(path: str, noise: OdometryNoise, twist_window: float, robot: 
 
 def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = None,
                    per_floor: bool = False, profile_dir: str | None = None,
-                   floor_names: dict | None = None, command: str = "") -> OdometryNoise:
+                   floor_names: dict | None = None, command: str = "",
+                   default_floors=None) -> OdometryNoise:
     """Print the coverage of the config's noise and, with ``fit_noise``:
 
-    * one profile for all the recorded floors (:func:`fit`), its coverage
-      and YAML block, and with ``per_floor`` its coverage held out by seed;
+    * one profile for all the recorded floors (:func:`fit`; only those in
+      ``default_floors`` when given: the floors the config's default is
+      meant for), its coverage and YAML block, and with ``per_floor`` its
+      coverage held out by seed, on every recorded floor;
     * with ``per_floor`` and recordings of several floors (conditions), also
       one profile per floor, with
       its held-out coverage (leave one run out) when a floor has >= 2 runs,
@@ -677,11 +696,16 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
     print(coverage_table(samples, noise))
     floors = list(dict.fromkeys(samples.condition.tolist()))
     profiles = {}
+    fit_floors = [f for f in floors if default_floors is None or f in default_floors]
+    if not fit_floors:      # the default floors' runs were all skipped
+        print("none of the default floors was recorded: the profile is fitted on every floor")
+        fit_floors = floors
     if fit_noise:
         start = noise
-        noise = fit(samples, start)
-        print(f"\ncalibrated coverage, one profile for all {len(floors)} recorded floor(s) "
-              "(one: scaled to 95 %; several: each as close to 95 % as one set allows):")
+        noise = fit(samples.subset(fit_floors), start)
+        print(f"\ncalibrated coverage, one profile fitted on {len(fit_floors)} of the "
+              f"{len(floors)} recorded floor(s) ({', '.join(fit_floors)}; one: scaled to 95 %; "
+              "several: each as close to 95 % as one set allows):")
         print(coverage_table(samples, noise))
         print("\ncalibrated parameters (config file, base_controller: ros__parameters:):")
         print(noise_yaml(noise, cfg.twist_window))
@@ -689,7 +713,7 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
             if len({r.rsplit(" seed ", 1)[-1] for r in samples.runs}) >= 2:
                 print("\nthe all-floor profile, held out (each seed's runs against the profile "
                       "fitted on the other seeds' runs of every floor):")
-                print(band_table(list(held_out_by_seed(samples, start).items())))
+                print(band_table(list(held_out_by_seed(samples, start, fit_floors).items())))
             rows = []
             for floor in floors:
                 sub = samples.subset([floor])

@@ -41,10 +41,11 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from holonomic_core.calibration import CalibrationError, calibrate, samples_from_readings
 from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
 from holonomic_core.kinematics import ESTIMATORS
@@ -273,6 +274,26 @@ def load_recording(path: str, robot: str, condition: str, seed: int, config) -> 
                          hidden_truth=json.loads(str(data["hidden_truth"])))
 
 
+def self_calibrated(rec: Recording, overrides: dict) -> tuple[Recording, float]:
+    """``rec`` as the odometry sees it after a self-calibration of the
+    robot's geometry (wheel radii, caster offsets, steering zeros; DDROT:
+    radii, separation, turret zero) on the first half of the run, against
+    its ground truth (:func:`holonomic_core.calibration.calibrate`, what
+    ``holonomic-calibrate --reference ground_truth`` does with a recording;
+    the second half is a drive the calibration has not seen). ``overrides``:
+    the config keys the run was made with. Returns the recording with the
+    calibrated config and the largest radius error left [%] against the
+    simulator's hidden truth (nan when the run hid none). Raises
+    CalibrationError when the half run cannot determine the geometry."""
+    half = len(rec.stamps) // 2
+    samples = samples_from_readings(rec.stamps[:half], rec.positions[:half], rec.truth[:half])
+    overlay = calibrate(rec.config.model, samples, reference="ground_truth").overlay()
+    errors = [abs(overlay[k] / v - 1.0) for k, v in rec.hidden_truth.items()
+              if k in overlay and "radius" in k]
+    return (replace(rec, config=load_config(rec.robot, {**overrides, **overlay})),
+            100.0 * max(errors) if errors else float("nan"))
+
+
 def final_errors(rec: Recording) -> Trial:
     """The final error of every estimator integrating the same recording."""
     path = rec.truth
@@ -357,6 +378,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--calibrate", action="store_true",
                         help="also fit the odometry covariance to ground truth over the runs, "
                              "print the coverage per condition and the odometry.* parameters")
+    parser.add_argument("--default-floor", action="append", type=condition_name,
+                        metavar="CONDITION",
+                        help="with --calibrate: fit the one profile for several floors (a "
+                             "config's default) on these recorded conditions only, "
+                             "repeatable (default: every recorded one); its held-out coverage "
+                             "is still shown on every floor")
+    parser.add_argument("--self-calibrate", action="store_true",
+                        help="before the odometry replays a run, calibrate the robot's "
+                             "geometry (radii, caster offsets, steering zeros) on the first "
+                             "half of that run against ground truth, as holonomic-calibrate "
+                             "does: the covariance of a robot whose geometry is calibrated "
+                             "(worn tyres after calibration)")
     parser.add_argument("--check", action="store_true",
                         help="print the coverage of the config's own covariance parameters")
     parser.add_argument("--plot", type=output_file, metavar="PNG",
@@ -372,6 +405,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.profiles and not args.calibrate:
         parser.error("--profiles needs --calibrate")
+    if args.default_floor and not args.calibrate:
+        parser.error("--default-floor needs --calibrate")
+    missing = set(args.default_floor or ()) - set(args.condition or CONDITIONS)
+    if missing:
+        parser.error(f"--default-floor {sorted(missing)[0]!r} is not among the --condition runs")
     for option, folder in (("--profiles", args.profiles), ("--recordings", args.recordings)):
         try:    # before the runs, not after them
             if folder:
@@ -392,10 +430,10 @@ def main(argv: list[str] | None = None) -> int:
                     args.recordings, args.robot, condition, seed, args.duration, args.speed,
                     args.acceleration, extra)
                 rec = None
+                overrides = run_overrides(seed, args.speed, args.acceleration,
+                                          {**CONDITIONS[condition], **(extra or {})})
                 if cached and os.path.exists(cached):
-                    config = load_config(args.robot, run_overrides(
-                        seed, args.speed, args.acceleration, {**CONDITIONS[condition],
-                                                              **(extra or {})}))
+                    config = load_config(args.robot, overrides)
                     try:
                         rec = load_recording(cached, args.robot, condition, seed, config)
                     except (OSError, ValueError, KeyError) as exc:
@@ -410,13 +448,23 @@ def main(argv: list[str] | None = None) -> int:
             except ConfigError as exc:      # e.g. per-wheel radii on a DDROT
                 print(f"{condition}: skipped for {args.robot} ({exc})", file=sys.stderr)
                 break
+            note = ""
+            if args.self_calibrate:
+                try:
+                    rec, radius_error = self_calibrated(rec, overrides)
+                except CalibrationError as exc:
+                    print(f"{condition} seed {seed}: left out, the self-calibration failed "
+                          f"({exc})", file=sys.stderr)
+                    continue
+                note = f"  radii calibrated to {radius_error:.2f} %"
             trial = final_errors(rec)
             trials.append(trial)
             if args.calibrate or args.check:
                 recordings.append(rec)
             errs = "  ".join(f"{e} {trial.position_error[e] * 1000:6.1f}mm" for e in ESTIMATORS)
             print(f"{condition:30s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
-                  f"({trial.seconds:.1f} s){'  FAULT: ' + trial.fault if trial.fault else ''}",
+                  f"({trial.seconds:.1f} s){note}"
+                  f"{'  FAULT: ' + trial.fault if trial.fault else ''}",
                   file=sys.stderr, flush=True)
     print(summarize(trials))
     if args.json:
@@ -426,6 +474,7 @@ def main(argv: list[str] | None = None) -> int:
         from holonomic_sim.odometry_calibration import calibrate_main
         calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot,
                        per_floor=True, profile_dir=args.profiles, floor_names=PROFILE_NAMES,
+                       default_floors=args.default_floor,
                        command=" ".join(["holonomic-odometry-experiment",
                                          *(argv if argv is not None else sys.argv[1:])]))
     return 0

@@ -197,7 +197,8 @@ def test_unexplained_slip_inflates_the_odometry_covariance():
     # twist variance per squared RMS residual
     noise = OdometryNoise(0.0, 0.0, 0.0, slip_position_gain=0.1,
                           slip_heading_gain=0.0, twist_variance=(0.0, 0.0, 0.0),
-                          twist_slip_gain=(2.0, 0.0, 0.0), latency_variance=0.0)
+                          twist_slip_gain=(2.0, 0.0, 0.0), latency_variance=0.0,
+                          slip4_position_gain=0.0, slip4_heading_gain=0.0)
 
     def covariance(conflict):
         odo = Odometry(model, "slip_min", noise)
