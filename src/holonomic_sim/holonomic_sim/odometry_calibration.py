@@ -711,8 +711,8 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
         print(noise_yaml(noise, cfg.twist_window))
         if per_floor and len(floors) > 1:
             if len({r.rsplit(" seed ", 1)[-1] for r in samples.runs}) >= 2:
-                print("\nthe all-floor profile, held out (each seed's runs against the profile "
-                      "fitted on the other seeds' runs of every floor):")
+                print("\nthe profile for several floors, held out (each seed's runs against "
+                      "the profile fitted on the other seeds' runs of its floors):")
                 print(band_table(list(held_out_by_seed(samples, start, fit_floors).items())))
             rows = []
             for floor in floors:
