@@ -106,6 +106,7 @@ ODOMETRY_EXPERIMENT = [
     (["--calibrate", "--condition", "uneven", "--default-floor", "worn"],
      "--default-floor 'worn tyres (r +-2 %)' is not among the --condition runs"),
     (["--calibrate", "--default-floor", "wet"], "expected one of nominal, uneven"),
+    (["--self-calibrate", "--duration", "20"], "--self-calibrate needs --duration >= 40 s"),
     (["--calibrate", "--profiles", "{file}/x"], "--profiles: cannot create the folder"),
     (["--recordings", "{file}/x"], "--recordings: cannot create the folder"),
 ]

@@ -3,10 +3,11 @@ packet of a ``SOCK_SEQPACKET`` Unix socket.
 
 The ROS node and its control loop process, and the control loop and the
 simulator's physics process (packages above this one, which this core does
-not name), exchange their set-up, replies, logs and fault texts this way. A sequenced-packet socket keeps each ``send`` one
-message (no length prefix, no partial reads) and reports a peer that closed
-its end, or died (the kernel closes a dead process's descriptors), as an
-empty packet: end-of-file. Both ends are processes of this workspace started
+not name), exchange their set-up, replies, logs and fault texts this way. A
+sequenced-packet socket keeps each ``send`` one message (no length prefix,
+no partial reads) and reports a peer that closed its end, or died (the
+kernel closes a dead process's descriptors), as an empty packet:
+end-of-file. Both ends are processes of this workspace started
 by one another over a ``socket.socketpair``, so unpickling trusts the peer.
 
 The cycle's data (commands, state records) does not go here: it travels as

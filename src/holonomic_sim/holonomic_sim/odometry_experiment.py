@@ -274,6 +274,12 @@ def load_recording(path: str, robot: str, condition: str, seed: int, config) -> 
                          hidden_truth=json.loads(str(data["hidden_truth"])))
 
 
+#: shortest --duration [s] with --self-calibrate: the first half of a run
+#: (random driving, then the return) must hold the 20 s of motion the
+#: geometry calibration asks for
+SELF_CALIBRATION_DURATION = 40.0
+
+
 def self_calibrated(rec: Recording, overrides: dict) -> tuple[Recording, float]:
     """``rec`` as the odometry sees it after a self-calibration of the
     robot's geometry (wheel radii, caster offsets, steering zeros; DDROT:
@@ -407,6 +413,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--profiles needs --calibrate")
     if args.default_floor and not args.calibrate:
         parser.error("--default-floor needs --calibrate")
+    if args.self_calibrate and args.duration < SELF_CALIBRATION_DURATION:
+        parser.error(f"--self-calibrate needs --duration >= {SELF_CALIBRATION_DURATION:g} s "
+                     "(the calibration wants 20 s of driving in each run's first half)")
     missing = set(args.default_floor or ()) - set(args.condition or CONDITIONS)
     if missing:
         parser.error(f"--default-floor {sorted(missing)[0]!r} is not among the --condition runs")
@@ -466,6 +475,10 @@ def main(argv: list[str] | None = None) -> int:
                   f"({trial.seconds:.1f} s){note}"
                   f"{'  FAULT: ' + trial.fault if trial.fault else ''}",
                   file=sys.stderr, flush=True)
+    if not trials and args.self_calibrate:
+        print("holonomic-odometry-experiment: no run could be self-calibrated (the reasons "
+              "above)", file=sys.stderr)
+        return 2
     print(summarize(trials))
     if args.json:
         with open(args.json, "w") as handle:
