@@ -5,7 +5,13 @@ in-process probe node.
 The shared fixtures of every package's tests, in one place: a pytest plugin
 registered through the ``pytest11`` entry point (setup.py), so that
 ``make test`` over all packages and ``colcon test --packages-select <pkg>``
-load the same set-up."""
+load the same set-up.
+
+``hot_path_mode``: the domain tests of the cycle's closed forms (kinematics,
+odometry, limits, the reading monitor, the controller core) run twice, once
+on each implementation (``[pure]``, ``[compiled]``): a module applies it
+with ``pytestmark = pytest.mark.usefixtures("hot_path_mode")``.
+"""
 
 from __future__ import annotations
 
@@ -24,6 +30,23 @@ def pytest_configure(config):
     os.environ["ROS_DOMAIN_ID"] = str(claim_domain_id())
     os.environ.setdefault("ROS_LOG_DIR",
                           str(Path(tempfile.gettempdir()) / "holonomic_test_ros_log"))
+
+
+@pytest.fixture(params=["pure", "compiled"])
+def hot_path_mode(request, monkeypatch):
+    """Run the test with HOLONOMIC_HOT_PATH set to "pure", then to "compiled".
+
+    The selection is read when a cycle object (a limiter, kinematics,
+    odometry, a reading monitor, a controller) is built
+    (holonomic_core.hot_path), so every object the test builds takes this
+    path; objects built at import time do not, so such a module builds its
+    objects in the tests. "compiled" fails (ImportError) where the extension
+    is not built: run ``make setup``."""
+    from holonomic_core import hot_path
+
+    monkeypatch.setenv(hot_path.ENV, request.param)
+    assert hot_path.name() == request.param
+    return request.param
 
 
 @pytest.fixture(scope="session")
