@@ -32,7 +32,18 @@ def pytest_configure(config):
                           str(Path(tempfile.gettempdir()) / "holonomic_test_ros_log"))
 
 
-@pytest.fixture(params=["pure", "compiled"])
+#: the paths hot_path_mode runs (HOLONOMIC_TEST_HOT_PATHS, comma-separated;
+#: default both): scripts/mutation.py runs the pure one for a mutant of the
+#: Python code, the compiled one for a mutant of the C code
+TEST_HOT_PATHS = tuple(p.strip() for p in os.environ.get(
+    "HOLONOMIC_TEST_HOT_PATHS", "pure,compiled").split(",") if p.strip())
+if not TEST_HOT_PATHS or set(TEST_HOT_PATHS) - {"pure", "compiled"}:
+    raise pytest.UsageError(
+        f"HOLONOMIC_TEST_HOT_PATHS={os.environ.get('HOLONOMIC_TEST_HOT_PATHS')!r}: "
+        "one or both of pure, compiled (comma-separated)")
+
+
+@pytest.fixture(params=TEST_HOT_PATHS)
 def hot_path_mode(request, monkeypatch):
     """Run the test with HOLONOMIC_HOT_PATH set to "pure", then to "compiled".
 
