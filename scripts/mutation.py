@@ -33,9 +33,17 @@ Mutants that no behaviour can tell apart from the original ("equivalent") are
 listed, each with its reason, in scripts/mutation_equivalent.yaml; the score
 leaves them out: killed / (tested - equivalent).
 
+Bugs written by hand (scripts/mutation_planted.yaml: the ones mutmut's
+operators cannot make -- a lost abs(), two names swapped, a change of the C
+twin) run with --planted: each is applied to the scratch copy, a bug in
+_hot_path.c is compiled into the scratch copy's extension, and its tests run
+on the path the bug lives on (HOLONOMIC_HOT_PATH and the hot_path_mode
+fixture's HOLONOMIC_TEST_HOT_PATHS: compiled for the C file, pure otherwise).
+
 Usage (from the repository, with ros2_ws/env.sh sourced; `make mutation`):
     python scripts/mutation.py [--budget MINUTES] [MODULE ...]   # default: every module
     python scripts/mutation.py --again MODULE ...   # after adding tests: the survivors only
+    python scripts/mutation.py --planted [NAME ...]  # the planted bugs (default: all)
 Prints a table per module, writes the diff of every surviving mutant to
 out/mutation/<module>.txt and the killed ones to out/mutation/<module>.json
 (what --again starts from).
@@ -58,6 +66,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 EQUIVALENT = Path(__file__).with_name("mutation_equivalent.yaml")
+PLANTED = Path(__file__).with_name("mutation_planted.yaml")
 #: the hypothesis tests of test_hostile_commands.py take minutes per run: not "fast"
 SLOW = ("not test_any_sequence_of_commands_stays_within_limits and "
         "not test_any_single_command_is_safe_and_keeps_its_direction and "
@@ -133,6 +142,11 @@ def scratch_env(work: Path) -> dict[str, str]:
     # C twin is checked separately: test_hot_path.py compares it with the pure
     # path, result by result.
     env["HOLONOMIC_HOT_PATH"] = "pure"
+    # and the tests that run on both paths (holonomic_testing's hot_path_mode
+    # fixture) run only their pure variant: the compiled one would not run
+    # the mutated Python either (--planted builds the scratch copy's C twin
+    # for a planted bug in it and runs the compiled variants)
+    env["HOLONOMIC_TEST_HOT_PATHS"] = "pure"
     # no .pyc of a mutated file: a later mutant of the same size written in
     # the same second would otherwise load the earlier one's stale bytecode
     env["PYTHONDONTWRITEBYTECODE"] = "1"
@@ -415,6 +429,74 @@ def run_module(work: Path, name: str, out: Path, budget: float | None,
     return counts
 
 
+# -- planted bugs ---------------------------------------------------------------
+
+def build_hot_path(work: Path, log) -> None:
+    """Compile the scratch copy's holonomic_core._hot_path in place (about 2 s)."""
+    package = work / "src" / "holonomic_core"
+    subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--inplace",
+                    "--build-temp", str(work / ".build-temp"), "--build-lib",
+                    str(work / ".build-lib")], cwd=package, stdout=log,
+                   stderr=subprocess.STDOUT, check=True)
+
+
+def run_planted(work: Path, out: Path, names: list[str]) -> int:
+    """Apply each planted bug of PLANTED in turn, run its tests on its path,
+    print killed / survived; 1 when one survives or an entry is stale."""
+    import yaml
+
+    entries = yaml.safe_load(PLANTED.read_text()) or []
+    unknown = set(names) - {e["name"] for e in entries}
+    if unknown:
+        print(f"mutation: unknown planted bug(s) {sorted(unknown)}; see {PLANTED}",
+              file=sys.stderr)
+        return 2
+    log = open(out / "planted.log", "w")
+    build_hot_path(work, log)               # the unmutated twin, for the compiled runs
+    failures = 0
+    print(f"{'planted bug':<56} {'path':<8} {'verdict':<9} {'time':>5}", flush=True)
+    for entry in entries:
+        if names and entry["name"] not in names:
+            continue
+        target = work / entry["file"]
+        original = target.read_text()
+        if original.count(entry["find"]) != 1:
+            print(f"{entry['name']:<56} {'':<8} {'stale':<9} (its text is not once in "
+                  f"{entry['file']})", flush=True)
+            failures += 1
+            continue
+        compiled = target.suffix == ".c"
+        path = "compiled" if compiled else "pure"
+        env = dict(scratch_env(work), HOLONOMIC_HOT_PATH=path, HOLONOMIC_TEST_HOT_PATHS=path)
+        started = time.monotonic()
+        command = [sys.executable, "-m", "pytest", *PYTEST, "-x", *entry["tests"]]
+        # the tests must pass without the bug, or a failure means nothing
+        if subprocess.run(command, cwd=work, env=env, stdout=log,
+                          stderr=subprocess.STDOUT).returncode != 0:
+            print(f"{entry['name']:<56} {path:<8} {'error':<9} (its tests fail without it: "
+                  f"{out / 'planted.log'})", flush=True)
+            failures += 1
+            continue
+        try:
+            target.write_text(original.replace(entry["find"], entry["replace"]))
+            if compiled:
+                build_hot_path(work, log)
+            result = subprocess.run(command, cwd=work, env=env, stdout=log,
+                                    stderr=subprocess.STDOUT)
+        finally:
+            target.write_text(original)
+            if compiled:
+                build_hot_path(work, log)
+        # 1: a test failed (killed); 0: all passed (survived); else pytest
+        # could not run them (the entry's tests are wrong)
+        verdict = {0: "survived", 1: "killed"}.get(result.returncode, "error")
+        failures += verdict != "killed"
+        print(f"{entry['name']:<56} {path:<8} {verdict:<9} "
+              f"{time.monotonic() - started:>4.0f}s", flush=True)
+    log.close()
+    return 1 if failures else 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("modules", nargs="*", default=None,
@@ -425,10 +507,21 @@ def main(argv=None) -> int:
                         help="run only the mutants the last run of each module did not kill "
                              "(out/mutation/<module>.json), when its source is unchanged: after "
                              "adding tests")
+    parser.add_argument("--planted", action="store_true",
+                        help="run the planted bugs of scripts/mutation_planted.yaml instead "
+                             "(MODULE ...: their names; default all)")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
         return worker(args.worker)
+    if args.planted:
+        out = ROOT / "out" / "mutation"
+        out.mkdir(parents=True, exist_ok=True)
+        work = scratch_copy()
+        try:
+            return run_planted(work, out, args.modules or [])
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
     modules = args.modules or list(MODULES)
     unknown = [m for m in modules if m not in MODULES]
     if unknown:

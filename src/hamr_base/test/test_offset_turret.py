@@ -17,6 +17,9 @@ B_IS_2A = dict(wheel_radius=0.0615, half_wheel_separation=0.1641, turret_offset=
 B_IS_HALF_A = dict(wheel_radius=0.05, half_wheel_separation=0.2, turret_offset=0.1)
 # a sweep of turret angles like HSR's twin-caster test: -360..360 deg
 TURRET_SWEEP = np.radians(np.arange(-360.0, 361.0, 15.0))
+#: the inverse kinematics have a compiled twin: the tests of them run on both
+#: ([pure], [compiled]: the hot_path_mode fixture of holonomic_testing)
+BOTH_PATHS = pytest.mark.usefixtures("hot_path_mode")
 
 
 def turret_pose(state, b):
@@ -47,6 +50,7 @@ def kin(request):
     return OffsetTurretKinematics(**request.param)
 
 
+@BOTH_PATHS
 def test_inverse_then_forward_is_identity_over_turret_sweep(kin):
     rng = np.random.default_rng(1)
     for phi in TURRET_SWEEP:
@@ -58,6 +62,7 @@ def test_inverse_then_forward_is_identity_over_turret_sweep(kin):
                 np.testing.assert_allclose(kin.forward(q, rates, est), twist, atol=1e-12)
 
 
+@BOTH_PATHS
 def test_forward_then_inverse_is_identity(kin):
     rng = np.random.default_rng(2)
     for phi in TURRET_SWEEP:
@@ -197,6 +202,7 @@ def load_model_path_text():
     return resolve_config("hamr").read_text()
 
 
+@BOTH_PATHS
 def test_load_model_hamr_follows_the_contract():
     model = load_model("hamr")
     assert model.kind == "ddrot" and OffsetTurretKinematics.kind == "ddrot"
@@ -218,6 +224,7 @@ def test_load_model_hamr_follows_the_contract():
                                [-0.1641 * wd / 0.0615, 0.1641 * wd / 0.0615, -wd], atol=1e-12)
 
 
+@BOTH_PATHS
 def test_unequal_wheels_turn_the_drive_base_by_their_rim_speed_difference():
     # both wheels at 10 rad/s, left r = 0.06, right r = 0.063: rim speeds 0.6
     # and 0.63 m/s, so v = 0.615 m/s and wd = (0.63 - 0.6) / (2 a) with
@@ -227,6 +234,11 @@ def test_unequal_wheels_turn_the_drive_base_by_their_rim_speed_difference():
                                  right_wheel_radius=0.063)
     q = np.zeros(3)
     np.testing.assert_allclose(kin.forward(q, [10.0, 10.0, 0.0]), [0.615, 0.02, 0.1],
+                               atol=1e-12)
+    # and back: that twist needs both wheels at 10 rad/s, the turret still
+    # (an inverse that divides the left rim speed by the right radius gives
+    # 0.6 / 0.063 = 9.52 and 0.63 / 0.06 = 10.5 rad/s)
+    np.testing.assert_allclose(kin.inverse(q, [0.615, 0.02, 0.1]), [10.0, 10.0, 0.0],
                                atol=1e-12)
     rng = np.random.default_rng(7)
     for phi in TURRET_SWEEP:
@@ -259,6 +271,7 @@ def test_per_wheel_radii_default_to_the_shared_radius():
 #   turret rate +2 rad/s: the drive base turns clockwise at 2 rad/s = vx / b.
 # * spin in place wz = 1: the turret axis must not move, so the wheels stand
 #   still and the turret turns at 1 rad/s, for any a and b.
+@BOTH_PATHS
 @pytest.mark.parametrize("phi, twist, expected", [
     (0.0, (0.0, 0.1, 0.0), (-4.0, 4.0, -1.0)),
     (-math.pi / 2, (0.2, 0.0, 0.0), (8.0, -8.0, 2.0)),

@@ -45,6 +45,7 @@ from std_msgs.msg import Header, String
 from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
 
+from holonomic_core.command_stamp import stamped_command_age
 from holonomic_core.config import config_from_flat, read_params_file, resolve_config
 from holonomic_core.controller import ControllerState
 from holonomic_core.description import generate_urdf
@@ -342,14 +343,12 @@ class BaseControllerNode(Node):
         received = None
         stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         if stamp > 0.0:  # an all-zero stamp means "unstamped": use the arrival time
-            age = self.get_clock().now().nanoseconds * 1e-9 - stamp
-            timeout = self.config.controller.cmd_timeout
-            if age < -0.1 or (timeout > 0.0 and age > timeout):
-                self.get_logger().warn(
-                    f"cmd_vel stamped {age:+.3f} s from now rejected (allowed: -0.1 s to "
-                    f"cmd_timeout={timeout:g} s old)", throttle_duration_sec=1.0)
+            age, problem = stamped_command_age(self.get_clock().now().nanoseconds * 1e-9, stamp,
+                                               self.config.controller.cmd_timeout)
+            if problem is not None:
+                self.get_logger().warn(problem, throttle_duration_sec=1.0)
                 return
-            received = time.monotonic() - max(age, 0.0)
+            received = time.monotonic() - age
         self._accept((twist.linear.x, twist.linear.y, twist.angular.z), received)
 
     def _accept(self, twist, received) -> None:

@@ -103,9 +103,15 @@ def test_stamped_commands_from_the_future_or_the_past_are_rejected(ros, start_br
                 time.sleep(0.05)
             return odom[-1].twist.twist.linear.x
 
+        # the window of ages is [-0.1 s, cmd_timeout = 0.5 s] (command_stamp.py)
         assert abs(speed_after(+5.0)) < 1e-6        # 5 s in the future
         assert abs(speed_after(-10.0)) < 1e-6       # 10 s old (> cmd_timeout)
+        assert abs(speed_after(+0.3)) < 1e-6        # 0.3 s ahead: past the tolerance
         assert speed_after(0.0) == pytest.approx(0.4, abs=0.02)
+        # inside the window: 0.2 s old (each one, published every 50 ms,
+        # fresh for another 0.3 s) and 50 ms ahead (a clock offset)
+        assert speed_after(-0.2) == pytest.approx(0.4, abs=0.02)
+        assert speed_after(+0.05) == pytest.approx(0.4, abs=0.02)
     finally:
         ros.destroy_publisher(pub)
         ros.destroy_subscription(sub)

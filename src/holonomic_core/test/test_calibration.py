@@ -310,3 +310,58 @@ def test_family_parameters_are_the_config_keys():
     assert fam.keys[:3] == ("pcv.c1.wheel_radius", "pcv.c2.wheel_radius", "pcv.c3.wheel_radius")
     assert fam.keys[-1] == "joints.c3_steer_joint.zero_correction"
     assert list(fam.nominal[:6]) == [0.04] * 3 + [0.03] * 3
+
+
+#: steering zeros a robot's config already carries (a calibration done
+#: before): joints.<caster>_steer_joint.zero_correction [rad]
+CONFIGURED_ZEROS = np.radians([2.0, -1.5, 0.7, -3.0])
+
+
+@pytest.mark.parametrize("drifted", [False, True], ids=["unchanged", "drifted"])
+def test_pcv_calibration_from_configured_zeros_keeps_or_finds_them(drifted):
+    """A robot calibrated before has zero corrections in its config; the
+    controller adds them to the raw readings, and the recording holds
+    those corrected angles. Recalibrated, a robot whose encoders did not
+    move gets its configured zeros back (not 0, not twice the correction);
+    one whose encoders slipped by +0.5, -0.3, 0, +1 deg since gets the
+    configured zeros minus that slip. Geometry as configured: radii and
+    offsets come back unchanged (slip-free data; the tolerances of
+    test_pcv_joint_data_of_another_geometry_gives_that_geometry_back)."""
+    names = load_model("xr4000").kinematics.caster_names
+    overrides = {f"joints.{n}_steer_joint.zero_correction": float(z)
+                 for n, z in zip(names, CONFIGURED_ZEROS)}
+    configured = load_model("xr4000", overrides)
+    slip = np.radians([0.5, -0.3, 0.0, 1.0]) if drifted else np.zeros(4)
+    # the true angles, plus what the encoders slipped by since the config's
+    # calibration: the readings as the controller saw them (raw + correction)
+    seen = np.zeros(len(configured.joint_names))
+    seen[0::2] = slip
+    stamps, positions, _ = _drive(load_model("xr4000"), _teleop(30.0, seed=8), zeros=seen)
+    result = calibrate(configured, samples_from_readings(stamps, positions, period=0.005),
+                       "none")
+    est = result.overlay()
+    for i, name in enumerate(names):
+        assert est[f"joints.{name}_steer_joint.zero_correction"] == pytest.approx(
+            CONFIGURED_ZEROS[i] - slip[i], abs=math.radians(0.005)), name
+        assert est[f"pcv.{name}.wheel_radius"] == pytest.approx(0.055, rel=1e-5), name
+        assert est[f"pcv.{name}.caster_offset"] == pytest.approx(0.02, rel=3e-3), name
+
+
+@pytest.mark.parametrize("drifted", [False, True], ids=["unchanged", "drifted"])
+def test_ddrot_calibration_from_a_configured_turret_zero_keeps_or_finds_it(drifted):
+    """The HAMR's turret zero configured at 1.5 deg: against ground truth,
+    a turret encoder that did not move gives 1.5 deg back; one that slipped
+    by 0.8 deg gives 1.5 - 0.8 = 0.7 deg. Radii and separation as configured
+    (the tolerance of test_ddrot_is_calibrated_against_the_reference)."""
+    zero = math.radians(1.5)
+    configured = load_model("hamr", {"joints.turret_joint.zero_correction": zero})
+    slip = math.radians(0.8) if drifted else 0.0
+    stamps, positions, poses = _drive(load_model("hamr"), _teleop(30.0, seed=9),
+                                      zeros=np.array([0.0, 0.0, slip]))
+    est = calibrate(configured, samples_from_readings(stamps, positions, poses),
+                    "ground_truth").overlay()
+    assert est["joints.turret_joint.zero_correction"] == pytest.approx(
+        zero - slip, abs=math.radians(0.01))
+    for key, value in (("ddrot.left_wheel_radius", 0.0615), ("ddrot.right_wheel_radius", 0.0615),
+                       ("ddrot.half_wheel_separation", 0.1641)):
+        assert est[key] == pytest.approx(value, rel=2e-4), key

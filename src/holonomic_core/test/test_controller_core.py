@@ -12,6 +12,10 @@ from holonomic_core.driver import DriverCommunicationError, DriverStateError
 from holonomic_core.mock_driver import MockDriver
 from holonomic_core.schema import ConfigError
 
+#: every test here runs on both implementations of the cycle's closed forms
+#: ([pure], [compiled]: the hot_path_mode fixture of holonomic_testing)
+pytestmark = pytest.mark.usefixtures("hot_path_mode")
+
 
 class FakeClock:
     def __init__(self):

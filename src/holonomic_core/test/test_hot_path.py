@@ -41,6 +41,33 @@ from holonomic_core.odometry import Odometry
 COMPILED = hot_path.module("compiled")     # ImportError: `make setup` did not build it
 ROBOTS = ("hamr", "xr4000")
 REL_ULPS = 2e-15
+#: geometries unlike the shipped configs' symmetric ones, so that a twin that
+#: mixes up two parameters the configs give equal values (the left and right
+#: wheel radius, the half separation a and the turret offset b, one caster's
+#: h, beta, r or b and another's) cannot agree with the other twin
+IRREGULAR = {
+    # a worn left tyre, a new right one, b != a (0.23 against 0.1641 m)
+    "hamr_uneven": ("hamr", {"ddrot.left_wheel_radius": 0.0601,
+                             "ddrot.right_wheel_radius": 0.0632,
+                             "ddrot.turret_offset": 0.23}),
+    # every caster its own h, beta, wheel radius and offset
+    "xr4000_irregular": ("xr4000", {
+        "pcv.front_left.h": 0.26, "pcv.front_left.beta": 0.70,
+        "pcv.front_left.wheel_radius": 0.057, "pcv.front_left.caster_offset": 0.018,
+        "pcv.rear_left.h": 0.22, "pcv.rear_left.beta": 2.50,
+        "pcv.rear_left.wheel_radius": 0.052, "pcv.rear_left.caster_offset": 0.026,
+        "pcv.rear_right.h": 0.25, "pcv.rear_right.beta": -2.20,
+        "pcv.rear_right.wheel_radius": 0.055, "pcv.rear_right.caster_offset": 0.021,
+        "pcv.front_right.h": 0.21, "pcv.front_right.beta": -0.90,
+        "pcv.front_right.wheel_radius": 0.0585, "pcv.front_right.caster_offset": 0.015}),
+}
+GEOMETRIES = ROBOTS + tuple(IRREGULAR)
+
+
+def robot_config(geometry):
+    """load_config of a shipped robot (its name) or of an IRREGULAR geometry."""
+    robot, overrides = IRREGULAR.get(geometry, (geometry, {}))
+    return load_config(robot, {"driver": "mock", **overrides})
 
 
 def build(monkeypatch, selected, factory):
@@ -167,7 +194,7 @@ def test_joint_rate_saturation_is_bitwise_that_of_the_pure_path():
 # -- kinematics -----------------------------------------------------------------
 
 def _kinematics(robot):
-    cfg = load_config(robot, {"driver": "mock"})
+    cfg = robot_config(robot)
     return lambda: type(cfg.model.kinematics).from_params(cfg.values)
 
 
@@ -179,7 +206,7 @@ def _configurations(n, rng, count=1500):
     return qs
 
 
-@pytest.mark.parametrize("robot", ROBOTS)
+@pytest.mark.parametrize("robot", GEOMETRIES)
 def test_inverse_kinematics_are_bitwise_those_of_the_pure_path(monkeypatch, robot):
     pure, compiled = both(monkeypatch, _kinematics(robot))
     rng = np.random.default_rng(3)
@@ -194,7 +221,7 @@ def test_inverse_kinematics_are_bitwise_those_of_the_pure_path(monkeypatch, robo
                      compiled.inverse([0.1] * n, [0.3, 0.0, 0.2]))
 
 
-@pytest.mark.parametrize("robot", ROBOTS)
+@pytest.mark.parametrize("robot", GEOMETRIES)
 def test_the_slip_min_fit_matches_the_pure_path(monkeypatch, robot):
     pure, compiled = both(monkeypatch, _kinematics(robot))
     rng = np.random.default_rng(4)
@@ -248,13 +275,13 @@ def _odometry_states(odo, qs, stamps):
 
 
 @pytest.mark.parametrize("window", [0.0, 0.03])
-@pytest.mark.parametrize("robot", ROBOTS)
+@pytest.mark.parametrize("robot", GEOMETRIES)
 def test_odometry_matches_the_pure_path(monkeypatch, robot, window):
-    cfg = load_config(robot, {"driver": "mock"})
+    cfg = robot_config(robot)
     c = cfg.controller
     # the model (its kinematics) is built under the same selection as the odometry
     pure, compiled = both(monkeypatch, lambda: Odometry(
-        load_config(robot, {"driver": "mock"}).model, c.estimator, c.noise, window))
+        robot_config(robot).model, c.estimator, c.noise, window))
     rng = np.random.default_rng(5)
     qs, stamps = _readings(len(cfg.model.joint_names), rng)
     for k, (want, got) in enumerate(zip(_odometry_states(pure, qs, stamps),
@@ -352,6 +379,11 @@ def test_reading_checks_give_the_pure_path_verdicts(monkeypatch):
             v = v.copy(); v[2] = 6.5
         elif odd == 20:
             q = q.copy(); q[1] += 0.5
+        elif odd == 25:
+            # backwards: a check without the absolute value passes this one
+            q = q.copy(); q[0] -= 0.5
+        elif odd == 35:
+            v = v.copy(); v[1] = -6.5
         elif odd == 30:
             v = v.copy(); v[0] = math.nan
         elif odd == 40:
@@ -380,7 +412,7 @@ def _controller(robot):
     from holonomic_core.loop import ManualClock
     from holonomic_core.mock_driver import MockDriver
 
-    cfg = load_config(robot, {"driver": "mock"})
+    cfg = robot_config(robot)
     clock = ManualClock()
     driver = MockDriver(cfg.model, cfg.values, cfg.controller.control_rate, clock=clock)
     driver.configure()
@@ -389,7 +421,7 @@ def _controller(robot):
     return ctrl, clock
 
 
-@pytest.mark.parametrize("robot", ROBOTS)
+@pytest.mark.parametrize("robot", GEOMETRIES)
 def test_a_controller_on_either_path_commands_the_same_joints(monkeypatch, robot):
     (pure, pure_clock), (compiled, compiled_clock) = both(monkeypatch, lambda: _controller(robot))
     rng = np.random.default_rng(7)

@@ -5,13 +5,26 @@ import math
 import numpy as np
 import pytest
 
-from holonomic_core.limits import TwistLimiter, saturate_joint_rates
+from holonomic_core.limits import TwistLimiter, joint_rate_saturation
 from holonomic_core.model import load_model
 from holonomic_core.odometry import Odometry, OdometryNoise
 from holonomic_core.se2 import compose_arc
 
-LIMITER = TwistLimiter(max_velocity=(1.0, 0.5, 2.0), max_acceleration=(2.0, 1.0, 4.0),
-                       max_deceleration=(4.0, 2.0, 8.0))
+#: every test here runs on both implementations of the cycle's closed forms
+#: ([pure], [compiled]: the hot_path_mode fixture of holonomic_testing)
+pytestmark = pytest.mark.usefixtures("hot_path_mode")
+
+
+
+def limiter():
+    """The limits of these tests, built in the test (under its hot_path_mode)."""
+    return TwistLimiter(max_velocity=(1.0, 0.5, 2.0), max_acceleration=(2.0, 1.0, 4.0),
+                        max_deceleration=(4.0, 2.0, 8.0))
+
+
+def saturate_joint_rates(rates, max_rates):
+    """The joint-rate saturation the hot_path_mode selects (limits picks it at import)."""
+    return joint_rate_saturation()(rates, max_rates)
 
 
 def unit(v):
@@ -20,18 +33,18 @@ def unit(v):
 
 def test_velocity_limit_scales_the_whole_twist_and_keeps_its_direction():
     # y is limited to 0.5: (1.0, 1.0, 0) scales by 0.5 to (0.5, 0.5, 0), not (1.0, 0.5, 0)
-    out, scale = LIMITER.limit_velocity(np.array([1.0, 1.0, 0.0]))
+    out, scale = limiter().limit_velocity(np.array([1.0, 1.0, 0.0]))
     np.testing.assert_allclose(out, [0.5, 0.5, 0.0])
     assert scale == pytest.approx(0.5)
 
 
 def test_velocity_limit_by_hand():
     # (2, 0.25, 1): x is twice its 1.0 m/s limit, so everything is halved
-    limited, scale = LIMITER.limit_velocity(np.array([2.0, 0.25, 1.0]))
+    limited, scale = limiter().limit_velocity(np.array([2.0, 0.25, 1.0]))
     assert scale == 0.5 and limited.tolist() == [1.0, 0.125, 0.5]
     # within every limit: unchanged, scale exactly 1, and a copy
     within = np.array([0.5, -0.5, 2.0])
-    limited, scale = LIMITER.limit_velocity(within)
+    limited, scale = limiter().limit_velocity(within)
     assert scale == 1.0 and limited.tolist() == within.tolist() and limited is not within
 
 
@@ -52,7 +65,7 @@ def test_limits_that_are_not_three_positive_numbers_are_refused(limits):
 
 def test_an_axis_that_does_not_change_does_not_stop_the_others_being_limited():
     # x holds 0.5 m/s; y asks for 0 -> 1.0 m/s: 1.0 m/s^2 * 0.1 s = 0.1 m/s of it
-    out = LIMITER.limit_acceleration(np.array([0.5, 1.0, 0.0]), np.array([0.5, 0.0, 0.0]), 0.1)
+    out = limiter().limit_acceleration(np.array([0.5, 1.0, 0.0]), np.array([0.5, 0.0, 0.0]), 0.1)
     np.testing.assert_allclose(out, [0.5, 0.1, 0.0], atol=1e-12)
 
 
@@ -62,17 +75,34 @@ def test_acceleration_ramps_along_the_commanded_direction():
     dt = 0.01
     # from rest: allowed changes per step 0.02, 0.01, 0.04 -> the y axis binds,
     # scale = 0.01 / 0.5 = 0.02 -> (0.01, 0.01, 0.02)
-    out = LIMITER.limit_acceleration(target, prev, dt)
+    out = limiter().limit_acceleration(target, prev, dt)
     np.testing.assert_allclose(out, [0.01, 0.01, 0.02])
     for _ in range(200):
-        prev = LIMITER.limit_acceleration(target, prev, dt)
+        prev = limiter().limit_acceleration(target, prev, dt)
         np.testing.assert_allclose(unit(prev), unit(target), atol=1e-12)
     np.testing.assert_allclose(prev, target)
 
 
+def test_limit_is_the_speed_limit_then_the_acceleration_ramp_in_one_call():
+    """TwistLimiter.limit, the call the controller makes each cycle (compiled
+    or pure). (2, 0.25, 1) from rest over 0.1 s: the speed limits halve it to
+    (1, 0.125, 0.5); from rest the ramp allows 0.2, 0.1, 0.4 per step
+    (2, 1, 4 m/s^2 x 0.1 s), so x binds: scale 0.2 -> (0.2, 0.025, 0.1).
+    Slowing from there to rest: 4, 2, 8 m/s^2 x 0.1 s allow 0.4, 0.2, 0.8,
+    more than the changes: rest at once. A reversal, (-1, 0, 0) from
+    (0.2, 0, 0), is bounded by the deceleration: 0.4 of the 1.2 change ->
+    -0.2 m/s."""
+    lim = limiter()
+    out = lim.limit(np.array([2.0, 0.25, 1.0]), np.zeros(3), 0.1)
+    np.testing.assert_allclose(out, [0.2, 0.025, 0.1], rtol=1e-12)
+    np.testing.assert_array_equal(lim.limit(np.zeros(3), out, 0.1), [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(lim.limit(np.array([-1.0, 0.0, 0.0]), np.array([0.2, 0.0, 0.0]),
+                                         0.1), [-0.2, 0.0, 0.0], rtol=1e-12)
+
+
 def test_deceleration_limit_applies_when_slowing_down():
     prev = np.array([1.0, 0.0, 0.0])
-    out = LIMITER.limit_acceleration(np.zeros(3), prev, 0.01)
+    out = limiter().limit_acceleration(np.zeros(3), prev, 0.01)
     # decel 4 m/s^2 * 0.01 s = 0.04
     np.testing.assert_allclose(out, [0.96, 0.0, 0.0])
 

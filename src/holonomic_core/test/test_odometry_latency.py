@@ -16,6 +16,10 @@ from holonomic_core.model import load_model
 from holonomic_core.odometry import Odometry, OdometryNoise
 from test_limits_odometry import drive   # constant body twist -> encoder readings
 
+#: every test here runs on both implementations of the cycle's closed forms
+#: ([pure], [compiled]: the hot_path_mode fixture of holonomic_testing)
+pytestmark = pytest.mark.usefixtures("hot_path_mode")
+
 ZERO = (0.0, 0.0, 0.0)
 LATENCY = OdometryNoise(0.0, 0.0, 0.0, 0.0, 0.0, ZERO, ZERO, ZERO, latency_variance=1e-4,
                         slip4_position_gain=0.0, slip4_heading_gain=0.0)

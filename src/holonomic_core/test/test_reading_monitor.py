@@ -11,12 +11,17 @@ from holonomic_core.monitor import MonitorLimits, ReadingMonitor
 
 from test_controller_core import arm, make, run
 
+#: every test here runs on both implementations of the cycle's closed forms
+#: ([pure], [compiled]: the hot_path_mode fixture of holonomic_testing)
+pytestmark = pytest.mark.usefixtures("hot_path_mode")
+
 
 class CorruptibleMock(MockDriver):
     """Ideal motors, plus injectable faults of the reading path."""
 
     velocity_spike = None          # (joint index, rad/s) for the next reading
     position_jump = None           # (joint index, rad) from the next reading on
+    position_glitch = None         # (joint index, rad) in the next reading only
     frozen = False                 # repeat the last reading forever
     blocked = None                 # joint index that cannot move
     stamp_offset = 0.0             # added to every stamp (a clock restart)
@@ -33,6 +38,9 @@ class CorruptibleMock(MockDriver):
         if self.velocity_spike is not None:
             velocities[self.velocity_spike[0]] = self.velocity_spike[1]
             self.velocity_spike = None
+        if self.position_glitch is not None:
+            positions[self.position_glitch[0]] += self.position_glitch[1]
+            self.position_glitch = None
         reading = JointReading(r.stamp + self.stamp_offset, positions, velocities, r.efforts)
         self._last_reading = reading
         return reading
@@ -55,10 +63,11 @@ def moving():
     return ctrl, driver, clock
 
 
-def test_encoder_velocity_spike_faults_and_stops_naming_the_joint(moving):
+@pytest.mark.parametrize("spike", [4000.0, -4000.0])
+def test_encoder_velocity_spike_faults_and_stops_naming_the_joint(moving, spike):
     ctrl, driver, clock = moving
     pose = ctrl.odometry.pose.copy()
-    driver.velocity_spike = (1, 4000.0)     # thousands of rad/s, as real encoders glitch
+    driver.velocity_spike = (1, spike)      # thousands of rad/s, either way, as encoders glitch
     run(ctrl, clock, 1)
     assert ctrl.state is ControllerState.FAULT
     assert "right_wheel_joint" in ctrl.fault and "glitch" in ctrl.fault
@@ -72,9 +81,10 @@ def test_encoder_velocity_spike_faults_and_stops_naming_the_joint(moving):
     assert ctrl.state is ControllerState.ARMED and ctrl.twist_command[0] > 0.3
 
 
-def test_encoder_position_jump_faults_and_never_reaches_the_odometry(moving):
+@pytest.mark.parametrize("jump", [50.0, -50.0])
+def test_encoder_position_jump_faults_and_never_reaches_the_odometry(moving, jump):
     ctrl, driver, clock = moving
-    driver.position_jump = (0, 50.0)        # 50 rad in one 5 ms cycle
+    driver.position_jump = (0, jump)        # 50 rad in one 5 ms cycle, forwards or back
     pose = ctrl.odometry.pose.copy()
     run(ctrl, clock, 1)
     assert ctrl.state is ControllerState.FAULT and "left_wheel_joint" in ctrl.fault
@@ -85,6 +95,52 @@ def test_encoder_position_jump_faults_and_never_reaches_the_odometry(moving):
     assert ctrl.state is ControllerState.ARMED
     run(ctrl, clock, 10)
     assert np.linalg.norm(ctrl.odometry.pose[:2] - pose[:2]) < 0.05
+
+
+@pytest.mark.parametrize("glitch", [50.0, -50.0])
+def test_a_glitch_that_returns_faults_once_and_leaves_the_odometry_alone(moving, glitch):
+    """One reading 50 rad off (a bit error on the bus), the next back on the
+    encoder's track. The glitch faults the base; it never becomes the
+    reference, so the good reading after it is no second jump (neither the
+    +-50 rad there nor the -+50 rad back reach the odometry: 50 rad on a
+    6 cm wheel would be 3 m), and re-armed the base drives on."""
+    ctrl, driver, clock = moving
+    pose = ctrl.odometry.pose.copy()
+    faults = ctrl.counters["implausible_readings"]
+    driver.position_glitch = (0, glitch)
+    run(ctrl, clock, 1)
+    assert ctrl.state is ControllerState.FAULT
+    # 50 rad less or more the wheel's 6.5 rad/s x 5 ms of true motion
+    assert ctrl.fault.startswith("left_wheel_joint: position jumped by ")
+    assert abs(float(ctrl.fault.split(" by ")[1].split()[0]) - 50.0) < 0.1, ctrl.fault
+    run(ctrl, clock, 20)                    # back on track; the base is stopped
+    assert ctrl.counters["implausible_readings"] == faults + 1
+    # at most the cycle before the fault's motion (0.4 m/s x 5 ms) and the stop
+    assert np.linalg.norm(ctrl.odometry.pose[:2] - pose[:2]) < 0.01
+    arm(ctrl, clock)
+    ctrl.set_command((0.4, 0.0, 0.0))
+    run(ctrl, clock, 100)
+    assert ctrl.state is ControllerState.ARMED and ctrl.twist_command[0] > 0.3
+    # 0.5 s forward at up to 0.4 m/s: forward, never a 3 m leap
+    moved = ctrl.odometry.pose[:2] - pose[:2]
+    assert 0.02 < np.linalg.norm(moved) < 0.25
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_single_glitch_reading_is_named_and_the_next_good_one_passes(sign):
+    """By hand, a 1 rad/s joint at rest, bound 3 x 1 rad/s x 0.25 s = 0.75 rad:
+    a reading 2 rad off either way is a jump of 2 rad; the next, back at 0,
+    is compared with the last good reading (0 rad, 0.5 s before): no jump.
+    A reading 2 rad off that stays is named once, then (as it is never
+    accepted) named again on the next reading."""
+    limits = MonitorLimits(3.0, 0.5, 0.3, 0.5)
+    monitor = ReadingMonitor(["a"], [1.0], 0.25, limits)
+    assert monitor.check(JointReading(1.0, [0.0], [0.0], []), 1.0) is None
+    assert monitor.check(JointReading(1.25, [2.0 * sign], [0.0], []), 1.25) == (
+        "a: position jumped by 2 rad in 0.25 s: encoder glitch")
+    assert monitor.check(JointReading(1.5, [0.0], [0.0], []), 1.5) is None
+    assert monitor.check(JointReading(1.75, [2.0 * sign], [0.0], []), 1.75) is not None
+    assert monitor.check(JointReading(2.0, [2.0 * sign], [0.0], []), 2.0) is not None
 
 
 def test_frozen_readings_fault_after_the_reading_timeout(moving):
@@ -257,6 +313,14 @@ def test_glitch_bounds_are_inclusive_with_a_micro_radian_allowance():
         "a: position jumped by 0.75 rad in 0.25 s: encoder glitch")
     assert monitor().check(JointReading(1.0, [1.0], [0.0], []), 1.25) == (
         "a: position jumped by 1 rad in 0 s: encoder glitch")
+    # the same bounds backwards: a speed of -3 rad/s and a step of -0.75 rad
+    # are accepted, -3.0001 rad/s and -0.7500015 rad are glitches
+    assert monitor().check(JointReading(1.25, [0.0], [-3.0], []), 1.25) is None
+    assert monitor().check(JointReading(1.25, [0.0], [-3.0001], []), 1.25) == (
+        "a: velocity reading -3 rad/s is over 3x its limit (1 rad/s): encoder glitch")
+    assert monitor().check(JointReading(1.25, [-0.75], [0.0], []), 1.25) is None
+    assert monitor().check(JointReading(1.25, [-0.7500015], [0.0], []), 1.25) == (
+        "a: position jumped by 0.75 rad in 0.25 s: encoder glitch")
 
 
 def test_a_zero_tracking_timeout_disables_the_tracking_check():

@@ -3,12 +3,17 @@
 import math
 
 import numpy as np
+import pytest
 
 from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
 from holonomic_core.mock_driver import MockDriver
 from holonomic_core.slip_monitor import SlipLimits, SlipMonitor
+
+#: every test here runs on both implementations of the cycle's closed forms
+#: ([pure], [compiled]: the hot_path_mode fixture of holonomic_testing)
+pytestmark = pytest.mark.usefixtures("hot_path_mode")
 
 
 def test_a_unit_is_named_only_after_staying_above_the_threshold_for_the_duration():

@@ -70,6 +70,62 @@ def test_velocity_loop_on_an_inertia_is_a_first_order_loop_of_the_bandwidth(phys
     assert abs(result.steady_state_error) < 1e-3
 
 
+def test_viscous_friction_settles_a_constant_torque_at_torque_over_b():
+    """Torque mode, 0.5 N m on J = 0.01 kg m^2 with viscous friction b = 0.05
+    N m s/rad: J dv/dt = tau - b v, so v = (tau / b)(1 - exp(-t b / J)): the
+    speed settles at tau / b = 10 rad/s with the time constant J / b = 0.2 s,
+    6.321 rad/s after 0.2 s, 9.933 after 1 s, 10.000 after 2 s (the Euler
+    steps of 0.1 ms are 0.015 % off the exponential at 0.2 s). Friction of the wrong sign
+    would add energy: the speed would grow as exp(t / 0.2 s)."""
+    bank = DriveBank(spec(viscous=np.array([0.05])), np.array([0.01]), 1e-4,
+                     np.random.default_rng(0))
+    bank.command_efforts(np.array([0.5]))
+    v, speeds = 0.0, {}                     # step count -> speed [rad/s]
+    for k in range(1, 20001):
+        v += bank.torques([v])[0] / 0.01 * 1e-4
+        speeds[k] = v
+    assert speeds[2000] == pytest.approx(10.0 * (1 - math.exp(-1.0)), rel=1e-3)    # 6.321
+    assert speeds[10000] == pytest.approx(10.0 * (1 - math.exp(-5.0)), rel=1e-3)   # 9.933
+    assert speeds[20000] == pytest.approx(10.0, rel=1e-3)
+    # the drive reports its motor torque, without the friction it loses
+    assert bank.torque[0] == 0.5
+
+
+@pytest.mark.parametrize("physics_dt", [1e-4, 4e-4])
+def test_viscous_friction_droops_a_proportional_loop_by_kp_over_kp_plus_b(physics_dt):
+    """P loop (r = 0) at 10 kHz on J = 0.01 kg m^2 with b = 0.5 N m s/rad:
+    in steady state Kp (v* - v) = b v, so v = v* Kp / (Kp + b). With the
+    sampled gain Kp = J (1 - exp(-w h)) / h, w = 2 pi 40 Hz, h = 0.1 ms:
+    Kp = 0.01 x 0.024819 / 1e-4 = 2.4819 N m s/rad, so a 5 rad/s command
+    settles at 5 x 2.4819 / 2.9819 = 4.1616 rad/s, the motor giving
+    b v = 2.081 N m (time constant J / (Kp + b) = 3.4 ms: settled after
+    0.1 s). The same with the loop sub-stepped 4 times in a 0.4 ms physics
+    step: the drive's own model of the joint between physics steps loses
+    the same b v. With the friction's sign wrong the loop would settle at
+    v* Kp / (Kp - b) = 6.26 rad/s."""
+    bank = DriveBank(spec(viscous=np.array([0.5])), np.array([0.01]), physics_dt,
+                     np.random.default_rng(0))
+    kp = 0.01 * (1 - math.exp(-2 * math.pi * 40.0 * 1e-4)) / 1e-4
+    assert bank.kp[0] == pytest.approx(2.4819, rel=1e-4) and kp == pytest.approx(bank.kp[0])
+    _, v = step_on_inertia(bank, 0.01, 5.0, 0.1)
+    assert v[-1] == pytest.approx(5.0 * 2.4819 / 2.9819, rel=1e-3)            # 4.1616
+    assert bank.torque[0] == pytest.approx(0.5 * 5.0 * 2.4819 / 2.9819, rel=1e-3)
+
+
+@pytest.mark.parametrize("physics_dt", [1e-4, 4e-4])
+def test_the_integrator_removes_the_viscous_droop_and_holds_b_times_the_speed(physics_dt):
+    """PI loop (integral ratio 0.05) with b = 0.5 N m s/rad: the integrator
+    winds up until the motor gives the friction's b v* = 0.5 x 5 = 2.5 N m,
+    and the speed is the command (the integral corner r w_c = 0.05 x
+    2 pi 40 / 1.0499 = 12 rad/s, the loop's slow pole: a time constant of
+    about 84 ms, so 1 s is 12 of them: within 1e-4 of the command)."""
+    bank = DriveBank(spec(viscous=np.array([0.5]), integral_ratio=0.05), np.array([0.01]),
+                     physics_dt, np.random.default_rng(0))
+    _, v = step_on_inertia(bank, 0.01, 5.0, 1.0)
+    assert v[-1] == pytest.approx(5.0, rel=1e-4)
+    assert bank.torque[0] == pytest.approx(2.5, rel=1e-3)
+
+
 def test_torque_limit_caps_the_output_and_the_integrator_does_not_wind_up():
     bank = DriveBank(spec(integral_ratio=0.05, torque_limit=np.array([2.0])),
                      np.array([0.01]), 1e-4, np.random.default_rng(0))

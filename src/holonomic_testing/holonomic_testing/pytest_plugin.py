@@ -5,7 +5,13 @@ in-process probe node.
 The shared fixtures of every package's tests, in one place: a pytest plugin
 registered through the ``pytest11`` entry point (setup.py), so that
 ``make test`` over all packages and ``colcon test --packages-select <pkg>``
-load the same set-up."""
+load the same set-up.
+
+``hot_path_mode``: the domain tests of the cycle's closed forms (kinematics,
+odometry, limits, the reading monitor, the controller core) run twice, once
+on each implementation (``[pure]``, ``[compiled]``): a module applies it
+with ``pytestmark = pytest.mark.usefixtures("hot_path_mode")``.
+"""
 
 from __future__ import annotations
 
@@ -24,6 +30,34 @@ def pytest_configure(config):
     os.environ["ROS_DOMAIN_ID"] = str(claim_domain_id())
     os.environ.setdefault("ROS_LOG_DIR",
                           str(Path(tempfile.gettempdir()) / "holonomic_test_ros_log"))
+
+
+#: the paths hot_path_mode runs (HOLONOMIC_TEST_HOT_PATHS, comma-separated;
+#: default both): scripts/mutation.py runs the pure one for a mutant of the
+#: Python code, the compiled one for a mutant of the C code
+TEST_HOT_PATHS = tuple(p.strip() for p in os.environ.get(
+    "HOLONOMIC_TEST_HOT_PATHS", "pure,compiled").split(",") if p.strip())
+if not TEST_HOT_PATHS or set(TEST_HOT_PATHS) - {"pure", "compiled"}:
+    raise pytest.UsageError(
+        f"HOLONOMIC_TEST_HOT_PATHS={os.environ.get('HOLONOMIC_TEST_HOT_PATHS')!r}: "
+        "one or both of pure, compiled (comma-separated)")
+
+
+@pytest.fixture(params=TEST_HOT_PATHS)
+def hot_path_mode(request, monkeypatch):
+    """Run the test with HOLONOMIC_HOT_PATH set to "pure", then to "compiled".
+
+    The selection is read when a cycle object (a limiter, kinematics,
+    odometry, a reading monitor, a controller) is built
+    (holonomic_core.hot_path), so every object the test builds takes this
+    path; objects built at import time do not, so such a module builds its
+    objects in the tests. "compiled" fails (ImportError) where the extension
+    is not built: run ``make setup``."""
+    from holonomic_core import hot_path
+
+    monkeypatch.setenv(hot_path.ENV, request.param)
+    assert hot_path.name() == request.param
+    return request.param
 
 
 @pytest.fixture(scope="session")

@@ -10,11 +10,15 @@ import numpy as np
 import pytest
 
 from holonomic_core.config import load_config
-from holonomic_core.limits import saturate_joint_rates
+from holonomic_core.limits import joint_rate_saturation
 from holonomic_core.model import load_model
 from holonomic_core.schema import ConfigError
 from pcv_base.powered_caster import Caster, PoweredCasterKinematics
 from pcv_base.torque_distribution import torque_distribution
+
+#: every test here runs on both implementations of the cycle's closed forms
+#: ([pure], [compiled]: the hot_path_mode fixture of holonomic_testing)
+pytestmark = pytest.mark.usefixtures("hot_path_mode")
 
 ESTIMATORS = ("slip_min", "pinv", "robust")
 
@@ -248,7 +252,7 @@ def test_joint_saturation_keeps_the_direction_of_a_strafe():
     twist = np.array([0.0, 1.0, 0.0])
     raw = model.inverse(q, twist)
     assert np.max(np.abs(raw[0::2])) > 40.0               # 1 m/s / 0.02 m = 50 rad/s
-    rates, scale = saturate_joint_rates(raw, model.max_joint_velocity)
+    rates, scale = joint_rate_saturation()(raw, model.max_joint_velocity)
     assert np.all(np.abs(rates) <= model.max_joint_velocity + 1e-9)
     assert scale == pytest.approx(12.0 / 50.0)
     # the scaled rates are exactly those of the scaled twist: same direction
