@@ -29,6 +29,7 @@ from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
 from holonomic_core.model import load_model
+from holonomic_core.nominal import driver_for
 from holonomic_core.schema import ConfigError
 from holonomic_core.se2 import relative_pose
 from holonomic_sim.odometry_experiment import final_errors, record_run, simulate
@@ -116,7 +117,7 @@ def reference_drive(robot: str, sim_seed: int, distance: float = 5.0, turns: flo
     b = cfg.model.kinematics.b
     clock = ManualClock()
     stamps, readings, truths = [], [], []
-    with cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate) as driver:
+    with driver_for(cfg) as driver:
         ctrl = BaseController(cfg, driver, clock=clock)
         ctrl.request_enable(True)
 
