@@ -171,9 +171,11 @@ def run_overrides(seed: int, speed: float, acceleration: float,
 
 def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
              speed: float = 1.25, acceleration: float = 2.0, overrides: dict | None = None,
-             calibration: dict | None = None, condition: str = "") -> Recording:
+             calibration: dict | None = None, condition: str = "",
+             finish=(0.0, 0.0, 0.0)) -> Recording:
     """Random moves inside ``area`` [m] for ``duration`` [s] (targets drawn
-    from ``seed``), then back to the start, recorded (see the module
+    from ``seed``), then to ``finish`` (x, y, yaw in odom [m, m, rad];
+    default back to the start), recorded (see the module
     docstring). ``overrides``: config keys (a slip condition, simulator
     faults, the drive model); ``calibration``: a calibration overlay for the
     controller. The simulated robot is built as holonomic-bringup builds it
@@ -216,11 +218,12 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
                 target_since = clock.now
             ctrl.set_command(_body_command(pose, target, speed, wz_max))
             step()
-        home = np.zeros(3)
+        home = np.array(finish, float)
         deadline = clock.now + 15.0
         while clock.now < deadline:
             pose = truths[-1]
-            if math.hypot(*pose[:2]) < 0.01 and abs(wrap_angle(pose[2])) < 0.02:
+            if (math.hypot(*(pose[:2] - home[:2])) < 0.01
+                    and abs(wrap_angle(pose[2] - home[2])) < 0.02):
                 break
             ctrl.set_command(_body_command(pose, home, speed, wz_max))
             step()
