@@ -229,10 +229,10 @@ def residual_function(family, samples: Samples, use_reference: bool = False,
             # offset times k gives residuals times k. Unnormalised, least
             # squares trades the reference's fit for smaller slip and
             # pulls the common scale low by about (slip energy) / (motion
-            # energy) -- 0.08-0.13 % on the drive model's XR4000, 0.5 %
-            # with a few skidding samples. In units of the common scale
-            # the slip term is blind to it, as the joints are: the scale
-            # comes from the reference alone.
+            # energy): small once skidding samples are left out (calibrate),
+            # larger on a slippery floor. In units of the common scale the
+            # slip term is blind to it, as the joints are: the scale comes
+            # from the reference alone.
             slip = slip * (nominal_mean / theta[..., radius].mean(axis=-1, keepdims=True))
         parts = [slip]
         if use_reference:
