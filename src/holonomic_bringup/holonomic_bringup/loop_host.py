@@ -165,6 +165,7 @@ def _build(setup: HostSetup, sock, before_drivers=None):
     from holonomic_core.config import config_from_flat
     from holonomic_core.controller import BaseController
     from holonomic_core.driver import DriverError
+    from holonomic_core.nominal import driver_for
     from holonomic_core.schema import ConfigError
 
     configs = []
@@ -184,8 +185,9 @@ def _build(setup: HostSetup, sock, before_drivers=None):
     try:
         for k, (cfg, robot) in enumerate(zip(configs, setup.robots)):
             extra = {"world": world} if world is not None else {}
-            driver = cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate,
-                                      **extra)
+            # a simulated robot is built from the robot's drawing (its config
+            # file), not from the controller's calibrated belief
+            driver = driver_for(cfg, **extra)
             drivers.append(driver)
             try:
                 driver.configure()

@@ -157,6 +157,14 @@ BASE_CONTROLLER = [
      "did you mean 'ddrot'"),
 ]
 
+CALIBRATION_EXPERIMENT = [
+    (["--routes", "0"], "--routes N must be 1..100"),
+    (["--routes", "two"], "invalid int value: 'two'"),
+    (["--route", "tape"], "--route needs --routes N"),
+    (["--routes", "1", "--route", "tapes"], "invalid choice: 'tapes'"),
+    (["--routes", "1", "--robot", "hamrr"], "did you mean 'hamr'"),
+]
+
 TABLES = {
     "holonomic-bringup": BRINGUP,
     "holonomic-teleop": TELEOP,
@@ -169,6 +177,7 @@ TABLES = {
     "holonomic-drive-test": DRIVE_TEST,
     "holonomic-calibrate": CALIBRATE,
     "holonomic-odometry-calibrate": ODOMETRY_CALIBRATE,
+    "holonomic-calibration-experiment": CALIBRATION_EXPERIMENT,
     "base_controller": BASE_CONTROLLER,
 }
 CASES = [(program, argv, words) for program, rows in TABLES.items() for argv, words in rows]

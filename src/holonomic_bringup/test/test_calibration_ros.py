@@ -14,7 +14,7 @@ from rcl_interfaces.srv import GetParameters
 
 from holonomic_core.config import load_config
 from holonomic_sim.sim_driver import SimDriver
-from holonomic_testing.ros_probe import Bringup, Probe, wait_until
+from holonomic_testing.ros_probe import Bringup, Probe, drive_script, wait_until
 
 #: the hidden faults of the recorded robot (steering zeros up to +-3 deg)
 FAULTS = ["-p", "sim.steer_zero_spread:=0.0524", "-p", "sim.seed:=4"]
@@ -110,3 +110,66 @@ def test_a_recorded_drive_is_calibrated_and_the_overlay_loads(ros, tmp_path):
     assert values == pytest.approx([estimate["joints.c1_steer_joint.zero_correction"],
                                     estimate["pcv.c2.caster_offset"]], abs=1e-6)
     assert values[0] != 0.0
+
+
+#: the worn XR4000 of the documented route (docs/calibration.md): +-2 % tyres
+#: and caster offsets, steering zeros up to 0.03 rad, fault seed 11
+WORN_XR4000 = ["-p", "sim.wheel_radius_spread:=0.02", "-p", "sim.caster_offset_spread:=0.02",
+               "-p", "sim.steer_zero_spread:=0.03", "-p", "sim.seed:=11"]
+#: the check path: not the recorded one (other directions, speeds and turns),
+#: about 4 m in 11 s
+CHECK_PATH = [((0.45, 0.15, 0.5), 4.0), ((-0.2, 0.4, -0.7), 4.0), ((0.35, -0.25, 0.9), 3.0)]
+
+
+def _check_drive(ros, tmp_path, name: str, args: list[str]) -> tuple[float, float]:
+    """Bring the XR4000 up with ``args``, drive CHECK_PATH, stop it: the
+    true path length and the odometry's position error [m]."""
+    robot = Bringup(["xr4000", "--namespace", name, "--enable", *args],
+                    tmp_path / f"{name}.log")
+    probe = Probe(ros, name)
+    try:
+        probe.wait_ready()
+        length, error, _ = drive_script(probe, CHECK_PATH)
+    finally:
+        probe.close()
+        assert robot.stop() == 0, robot.log()
+    return length, error
+
+
+def test_the_documented_route_calibrates_a_worn_xr4000_through_the_params_file(ros, tmp_path):
+    """The route a user takes: record the worn robot (torque mode), calibrate
+    the MCAP against its ground truth with holonomic-calibrate, start the
+    same worn robot with --params-file of the overlay and drive a path the
+    recording did not hold; its odometry must be about as good as that of a
+    robot that matches its drawing and at least twice as good as the worn
+    robot's without the overlay. Before the simulated robot was built from
+    the drawing, the overlay's radii and offsets were perturbed again and its
+    zero corrections subtracted by the simulated encoders: no better than
+    uncalibrated."""
+    bag = tmp_path / "worn.mcap"
+    robot = Bringup(["xr4000", "--namespace", "worn", "--enable", "--record", str(bag),
+                     "-p", "control_mode:=torque", *WORN_XR4000], tmp_path / "record.log")
+    probe = Probe(ros, "worn")
+    try:
+        probe.wait_ready()
+        for twist, seconds in SCRIPT:
+            probe.drive(twist, seconds)
+        probe.wait_at_rest()
+    finally:
+        probe.close()
+        assert robot.stop() == 0, robot.log()
+    overlay = tmp_path / "worn.calibration.yaml"
+    proc = cli("holonomic-calibrate", "xr4000", str(bag), "--reference", "ground_truth",
+               "--output", str(overlay))
+    assert proc.returncode == 0, proc.stderr
+
+    _, nominal = _check_drive(ros, tmp_path, "nominal", [])
+    _, uncalibrated = _check_drive(ros, tmp_path, "uncal", WORN_XR4000)
+    length, calibrated = _check_drive(ros, tmp_path, "cal",
+                                      ["--params-file", str(overlay), *WORN_XR4000])
+    report = (f"over {length:.2f} m: nominal {nominal * 1e3:.1f} mm, uncalibrated "
+              f"{uncalibrated * 1e3:.1f} mm, calibrated {calibrated * 1e3:.1f} mm")
+    # the route's criterion (holonomic_sim.calibration_routes): within 1.2 x the
+    # nominal error + 5 mm, and below half the uncalibrated one
+    assert calibrated <= 1.2 * nominal + 0.005, report
+    assert calibrated < 0.5 * uncalibrated, report

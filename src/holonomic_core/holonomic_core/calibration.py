@@ -217,12 +217,24 @@ def residual_function(family, samples: Samples, use_reference: bool = False,
     ``gauge_mean`` [m]) one stiff row that holds the mean radius there."""
     scale = _normaliser(family)
     radius = np.array([k == "radius" for k in family.kinds])
+    nominal_mean = float(family.nominal[radius].mean()) if radius.any() else 1.0
 
     def fun(z):
         # z (p,) -> (m,) residuals; z (k, p) -> (k, m), one row per parameter set
         theta = family.nominal + scale * np.asarray(z, float)
         lead = theta.shape[:-1]
-        parts = [np.reshape(family.slip(theta, samples), lead + (-1,))]
+        slip = np.reshape(family.slip(theta, samples), lead + (-1,))
+        if use_reference and radius.any():
+            # The slip residuals scale with the geometry: every radius and
+            # offset times k gives residuals times k. Unnormalised, least
+            # squares trades the reference's fit for smaller slip and
+            # pulls the common scale low by about (slip energy) / (motion
+            # energy): small once skidding samples are left out (calibrate),
+            # larger on a slippery floor. In units of the common scale the
+            # slip term is blind to it, as the joints are: the scale comes
+            # from the reference alone.
+            slip = slip * (nominal_mean / theta[..., radius].mean(axis=-1, keepdims=True))
+        parts = [slip]
         if use_reference:
             err = chord(family.body(theta, samples)) - samples.reference
             err[..., 2] *= family.length_scale
@@ -274,8 +286,52 @@ def calibrate(model, samples: Samples, reference: str = "none",
         if distance is None or not distance > 0:
             raise CalibrationError("--distance must be a measured distance > 0 [m]")
     fun, scale = residual_function(family, samples, use_ref, gauge)
+    z = _least_squares(fun, np.zeros(len(family.nominal)), iterations)
+    recorded = samples
+    skidded = _skidding(family, family.nominal + scale * z, samples)
+    if skidded.any():
+        # a wheel skidding is not kinematics: fit again without those
+        # samples (they would pull the geometry, and against ground truth
+        # the scale, toward explaining the skid)
+        samples = _subset(samples, ~skidded)
+        fun, scale = residual_function(family, samples, use_ref, gauge)
+        z = _least_squares(fun, z, iterations)
+    r = fun(z)
+    J = jacobian(fun, z)
+    m = len(r) - (1 if gauge is not None else 0)
+    dof = max(m - len(z) + (1 if gauge is not None else 0), 1)
+    body_r = r[:m]
+    sigma2 = float(body_r @ body_r) / dof
+    info = J.T @ J
+    weak = weakest_direction(family, info, sigma2)
+    if weak is not None:
+        raise CalibrationError(weak + " (" + missing_motion(family, samples) + ")")
+    cov = np.linalg.inv(info) * sigma2
+    theta = family.nominal + scale * z
+    stderr = scale * np.sqrt(np.maximum(np.diag(cov), 0.0))
+    result = CalibrationResult(family, theta, stderr, math.sqrt(sigma2), len(samples),
+                               reference)
+    if skidded.any():
+        result.notes.append(f"{int(skidded.sum())} of {len(skidded)} samples left out: a wheel "
+                            f"skidded (fit residual above {SKID_SPEED:g} m/s)")
+    if reference == "distance":
+        # the odometry's end point: of the whole recording, skids included
+        _scale_to_distance(result, recorded, distance)
+    elif reference == "none" and family.self_consistent:
+        result.notes.append("overall scale not observed: the mean wheel radius is kept as "
+                            "configured (give --distance or --reference ground_truth)")
+    return result
 
-    z = np.zeros(len(family.nominal))
+
+#: [m/s] a sample whose fit residual (at the first estimate) exceeds this
+#: rate skids: a wheel slides or spins, which no geometry explains (the
+#: controller's diagnostics.slip_threshold default)
+SKID_SPEED = 0.05
+
+
+def _least_squares(fun, z: np.ndarray, iterations: int) -> np.ndarray:
+    """Levenberg-Marquardt on ``fun`` (residual vector of normalised
+    parameters) from ``z``; the minimiser found."""
     r = fun(z)
     cost = float(r @ r)
     lam = 1e-3
@@ -294,26 +350,23 @@ def calibrate(model, samples: Samples, reference: str = "none",
             lam *= 10
         if not improved or np.max(np.abs(step)) < 1e-9:
             break
-    J = jacobian(fun, z)
-    m = len(r) - (1 if gauge is not None else 0)
-    dof = max(m - len(z) + (1 if gauge is not None else 0), 1)
-    body_r = r[:m]
-    sigma2 = float(body_r @ body_r) / dof
-    info = J.T @ J
-    weak = weakest_direction(family, info, sigma2)
-    if weak is not None:
-        raise CalibrationError(weak + " (" + missing_motion(family, samples) + ")")
-    cov = np.linalg.inv(info) * sigma2
-    theta = family.nominal + scale * z
-    stderr = scale * np.sqrt(np.maximum(np.diag(cov), 0.0))
-    result = CalibrationResult(family, theta, stderr, math.sqrt(sigma2), len(samples),
-                               reference)
-    if reference == "distance":
-        _scale_to_distance(result, samples, distance)
-    elif reference == "none" and family.self_consistent:
-        result.notes.append("overall scale not observed: the mean wheel radius is kept as "
-                            "configured (give --distance or --reference ground_truth)")
-    return result
+    return z
+
+
+def _skidding(family, theta: np.ndarray, samples: Samples) -> np.ndarray:
+    """(N,) bool: the samples whose fit residual at ``theta``, per second,
+    exceeds SKID_SPEED (none for a family without redundancy)."""
+    slip = np.asarray(family.slip(theta, samples))
+    if slip.size == 0:
+        return np.zeros(len(samples), bool)
+    rate = np.linalg.norm(slip.reshape(len(samples), -1), axis=1) / samples.durations
+    return rate > SKID_SPEED
+
+
+def _subset(samples: Samples, keep: np.ndarray) -> Samples:
+    """The samples where ``keep`` (N,) is true."""
+    return Samples(samples.positions[keep], samples.displacements[keep], samples.durations[keep],
+                   None if samples.reference is None else samples.reference[keep])
 
 
 def _scale_to_distance(result: CalibrationResult, samples: Samples, distance: float) -> None:

@@ -29,6 +29,7 @@ from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
 from holonomic_core.model import load_model
+from holonomic_core.nominal import driver_for
 from holonomic_core.schema import ConfigError
 from holonomic_core.se2 import relative_pose
 from holonomic_sim.odometry_experiment import final_errors, record_run, simulate
@@ -116,7 +117,7 @@ def reference_drive(robot: str, sim_seed: int, distance: float = 5.0, turns: flo
     b = cfg.model.kinematics.b
     clock = ManualClock()
     stamps, readings, truths = [], [], []
-    with cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate) as driver:
+    with driver_for(cfg) as driver:
         ctrl = BaseController(cfg, driver, clock=clock)
         ctrl.request_enable(True)
 
@@ -204,6 +205,37 @@ def print_measured(robot: str, sim_seed: int, faults: dict) -> bool:
     return True
 
 
+def routes_main(robots: list[str], seeds: int, only: list[str] | None) -> int:
+    """``--routes``: every route of every robot over fault seeds 1..``seeds``;
+    prints the table (stdout) and each trial as it ends (stderr). 1 when a
+    trial missed the route's criterion."""
+    from holonomic_sim.calibration_routes import ROUTES, TABLE_HEAD, route_trial
+
+    rows, failed = [], False
+    for robot in robots:
+        try:
+            kind = load_model(robot).kind
+        except ConfigError as exc:
+            print(f"holonomic-calibration-experiment: {exc}", file=sys.stderr)
+            return 2
+        for route in ROUTES.get(kind, ()):
+            if only and route not in only:
+                continue
+            for seed in range(1, seeds + 1):
+                try:
+                    trial = route_trial(robot, route, seed)
+                except CalibrationError as exc:
+                    rows.append(f"| {seed} | {robot} | {route} | refused: {exc} | | | **no** |")
+                    failed = True
+                    continue
+                rows.append(trial.row())
+                failed |= not trial.passed()
+                print(rows[-1] + f" path {trial.path_length:.1f} m", file=sys.stderr, flush=True)
+    print(TABLE_HEAD)
+    print("\n".join(rows))
+    return 1 if failed else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(prog="holonomic-calibration-experiment",
                                      description=__doc__.split("\n")[0])
@@ -227,7 +259,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--measured-only", action="store_true",
                         help="a DDROT: only the measured line-and-rotation calibration "
                              "(reference_drive), not the random drives")
+    parser.add_argument("--routes", type=int, metavar="N",
+                        help="instead: the documented calibration routes end to end "
+                             "(holonomic_sim.calibration_routes) over fault seeds 1..N, "
+                             "a markdown table of the held-out path's position errors")
+    parser.add_argument("--route", action="append", choices=("ground_truth", "distance", "tape"),
+                        help="with --routes: only this route (repeatable; default: every "
+                             "route of each robot's family)")
     args = parser.parse_args(argv)
+    if args.routes is not None:
+        if not 1 <= args.routes <= 100:
+            parser.error(f"--routes N must be 1..100, got {args.routes}")
+    elif args.route:
+        parser.error("--route needs --routes N")
+    if args.routes is not None:
+        return routes_main(args.robot or ["xr4000", "hamr"], args.routes, args.route)
     failed = False
     for robot in args.robot or ["xr4000", "comr3", "hamr"]:
         try:

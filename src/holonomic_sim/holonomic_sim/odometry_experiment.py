@@ -30,7 +30,8 @@ it also fits the odometry covariance to ground truth over the same runs
 (:mod:`holonomic_sim.odometry_calibration`); ``--check`` reports the coverage
 of the config's own covariance. :func:`simulate` is also the offline driver
 of the self-calibration experiment (a calibration overlay for the
-controller only, the simulator keeping its hidden geometry).
+controller only, the simulated robot built from the drawing and its hidden
+errors, as holonomic-bringup builds it: :mod:`holonomic_core.nominal`).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
 from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.loop import ManualClock
+from holonomic_core.nominal import driver_for
 from holonomic_core.odometry import Odometry
 from holonomic_core.se2 import wrap_angle
 from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
@@ -169,18 +171,22 @@ def run_overrides(seed: int, speed: float, acceleration: float,
 
 def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
              speed: float = 1.25, acceleration: float = 2.0, overrides: dict | None = None,
-             calibration: dict | None = None, condition: str = "") -> Recording:
+             calibration: dict | None = None, condition: str = "",
+             finish=(0.0, 0.0, 0.0)) -> Recording:
     """Random moves inside ``area`` [m] for ``duration`` [s] (targets drawn
-    from ``seed``), then back to the start, recorded (see the module
-    docstring). ``overrides``: config keys for the controller and the
-    simulated robot (a slip condition, simulator faults, the drive model);
-    ``calibration``: config keys for the controller only (a calibration
-    overlay), so the simulated robot keeps its geometry and faults."""
+    from ``seed``), then to ``finish`` (x, y, yaw in odom [m, m, rad];
+    default back to the start), recorded (see the module
+    docstring). ``overrides``: config keys (a slip condition, simulator
+    faults, the drive model); ``calibration``: a calibration overlay for the
+    controller. The simulated robot is built as holonomic-bringup builds it
+    (:func:`holonomic_core.nominal.driver_for`): from the robot's config
+    file's geometry and the ``sim.*`` errors, so neither the overlay nor a
+    geometry key among ``overrides`` changes it (they are the controller's
+    belief)."""
     merged = run_overrides(seed, speed, acceleration, overrides)
     cfg = load_config(robot, {**merged, **(calibration or {})})
-    physical = load_config(robot, merged).model if calibration else cfg.model
     clock = ManualClock()
-    driver = cfg.driver_class(physical, cfg.values, cfg.controller.control_rate)
+    driver = driver_for(cfg)
     rng = np.random.default_rng(seed)
     wz_max = min(1.5, cfg.controller.max_velocity[2])
     stamps, readings, truths, twists, internal = [], [], [], [], []
@@ -212,11 +218,12 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
                 target_since = clock.now
             ctrl.set_command(_body_command(pose, target, speed, wz_max))
             step()
-        home = np.zeros(3)
+        home = np.array(finish, float)
         deadline = clock.now + 15.0
         while clock.now < deadline:
             pose = truths[-1]
-            if math.hypot(*pose[:2]) < 0.01 and abs(wrap_angle(pose[2])) < 0.02:
+            if (math.hypot(*(pose[:2] - home[:2])) < 0.01
+                    and abs(wrap_angle(pose[2] - home[2])) < 0.02):
                 break
             ctrl.set_command(_body_command(pose, home, speed, wz_max))
             step()

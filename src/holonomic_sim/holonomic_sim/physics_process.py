@@ -142,7 +142,8 @@ def _read_newest(fd: int, size: int) -> bytes | None:
 
 class PhysicsLink:
     """The loop's end: starts the physics process for a SimDriver's
-    ``model`` and validated ``params`` (``sim.physics_process`` set false
+    ``model`` (the simulated body's nominal description, its ``body``) and
+    validated ``params`` (``sim.physics_process`` set false
     for the inner driver) at ``control_rate`` [Hz], then carries commands
     and the latest state. It is the SimDriver's plant
     (:class:`holonomic_sim.sim_driver.Plant`), as the in-process world is.

@@ -175,13 +175,27 @@ class InProcessPlant:
 class SimDriver(Driver):
     name = "sim"
     supports_effort = True
+    #: the simulated robot is a body of its own: :func:`holonomic_core.nominal.driver_for`
+    #: passes the robot's nominal description as ``body``
+    simulates_body = True
 
-    def __init__(self, model, params, control_rate: float, world=None):
-        """``world``: a shared :class:`~holonomic_sim.world.SimWorld` (a fleet
-        in one simulation). Its owner then steps it once per control period
-        for all robots, and ``read`` does not step; by default the driver
-        owns a world of its own and steps it."""
+    def __init__(self, model, params, control_rate: float, world=None, body=None):
+        """``model``: the controller's model (joint order and limits);
+        ``body``: the simulated robot's nominal description, the drawing
+        (:func:`holonomic_core.nominal.nominal_model`), which the hidden
+        ``sim.*`` errors perturb; default ``model``. A calibration the
+        controller loaded is in ``model`` only: it never changes the body or
+        its encoders. ``world``: a shared
+        :class:`~holonomic_sim.world.SimWorld` (a fleet in one simulation).
+        Its owner then steps it once per control period for all robots, and
+        ``read`` does not step; by default the driver owns a world of its own
+        and steps it."""
         super().__init__(model, params, control_rate)
+        if body is not None and tuple(body.joint_names) != tuple(model.joint_names):
+            raise ConfigError("robot.kinematics", body.kind,
+                              f"a body with the controller's joints {model.joint_names}")
+        #: the simulated robot's nominal description (before the sim.* errors)
+        self.body = model if body is None else body
         self._shared_world = world
         rate = float(params["sim.physics_rate"])
         ratio = rate / self.control_rate
@@ -193,8 +207,9 @@ class SimDriver(Driver):
         self._plant: Plant | None = None
         #: simulated wheel radii [m] when sim.wheel_radius_spread > 0
         self.wheel_radii: list[float] | None = None
-        #: the simulated geometry where it differs from the config: flat
-        #: config keys -> true values (what a perfect calibration writes)
+        #: the simulated geometry the sim.* errors changed: flat config keys
+        #: -> true values (what a perfect calibration writes); every other
+        #: key is as in the nominal description (:attr:`body`)
         self.hidden_truth: dict[str, float] = {}
         if params.get("sim.physics_process") and world is not None:
             raise ConfigError("sim.physics_process", True,
@@ -265,7 +280,7 @@ class SimDriver(Driver):
 
         p = self.params
         if p.get("sim.physics_process"):
-            link = PhysicsLink(self.model, p, self.control_rate)
+            link = PhysicsLink(self.body, p, self.control_rate)
             self._plant = link
             info = link.info
             self.hidden_truth = info["hidden_truth"]
@@ -280,10 +295,11 @@ class SimDriver(Driver):
         friction = p["sim.wheel_friction"] * (
             1.0 + p["sim.friction_spread"] * rng.uniform(-1.0, 1.0, n_wheels))
         body_model = self._body_model(rng)
-        # the physical robot's encoders read (angle - its configured
-        # correction) + the zero error; a controller with the same config
-        # adds the correction back and sees angle + error
-        reading_offset = self._encoder_zeros(rng) - self.model.zero_corrections
+        # the physical robot's encoders read (angle - the drawing's
+        # correction) + the zero error: a controller with the drawing's
+        # config adds the correction back and sees angle + error; one with a
+        # calibrated correction (drawing's - error) sees the angle
+        reading_offset = self._encoder_zeros(rng) - self.body.zero_corrections
         drive = None if p["sim.ideal_motors"] else drive_spec(self.model, p)
         # the drives' spread has its own stream: adding it left the friction
         # and radius draws of a seed unchanged
@@ -311,15 +327,16 @@ class SimDriver(Driver):
         self.friction = friction
 
     def _body_model(self, rng: np.random.Generator):
-        """The model the simulated body is built from: the controller's, or
-        with per-wheel radius, caster offset or wheel separation errors
-        (``sim.*_spread``), which the controller does not know about -- the
-        actuator conflict and slip of real, imperfect wheels. Records the
-        truth in :attr:`hidden_truth`."""
+        """The model the simulated body is built from: the nominal
+        description (:attr:`body`), with per-wheel radius, caster offset or
+        wheel separation errors (``sim.*_spread``), which the controller
+        does not know about -- the actuator conflict and slip of real,
+        imperfect wheels. Records the truth in :attr:`hidden_truth`."""
         p = self.params
-        kin = self.model.kinematics
+        nominal = self.body
+        kin = nominal.kinematics
         casters = getattr(kin, "casters", None)
-        flat = dict(self.model.params)
+        flat = dict(nominal.params)
         changed = {}
         radius = p["sim.wheel_radius_spread"]
         if radius > 0.0:
@@ -338,7 +355,7 @@ class SimDriver(Driver):
         if offset > 0.0:
             if casters is None:
                 raise ConfigError("sim.caster_offset_spread", offset,
-                                  f"0 for kinematics '{self.model.kind}' (casters only)")
+                                  f"0 for kinematics '{nominal.kind}' (casters only)")
             for caster, u in zip(casters, rng.uniform(-1.0, 1.0, len(casters))):
                 changed[f"pcv.{caster.name}.caster_offset"] = \
                     caster.caster_offset * (1.0 + offset * u)
@@ -346,12 +363,12 @@ class SimDriver(Driver):
         if separation > 0.0:
             if casters is not None:
                 raise ConfigError("sim.wheel_separation_spread", separation,
-                                  f"0 for kinematics '{self.model.kind}' (DDROT only)")
+                                  f"0 for kinematics '{nominal.kind}' (DDROT only)")
             changed["ddrot.half_wheel_separation"] = kin.a * (
                 1.0 + separation * rng.uniform(-1.0, 1.0))
         self.hidden_truth = dict(changed)
         if not changed:
-            return self.model
+            return nominal
         from holonomic_core.config import build_model
 
         flat.update(changed)
@@ -362,12 +379,12 @@ class SimDriver(Driver):
         steering joints and the turret; recorded in :attr:`hidden_truth` as
         the zero_correction a perfect calibration writes."""
         spread = self.params["sim.steer_zero_spread"]
-        names = self.model.joint_names
+        names = self.body.joint_names
         zeros = np.zeros(len(names))
         if spread > 0.0:
             steer = [i for i, n in enumerate(names) if n.endswith(("steer_joint", "turret_joint"))]
             zeros[steer] = spread * rng.uniform(-1.0, 1.0, len(steer))
-            corrections = self.model.zero_corrections
+            corrections = self.body.zero_corrections
             for i in steer:
                 self.hidden_truth[f"joints.{names[i]}.zero_correction"] = float(
                     corrections[i] - zeros[i])

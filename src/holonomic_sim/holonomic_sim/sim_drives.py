@@ -147,6 +147,8 @@ class SimDrivesDriver(Driver):
     """
 
     backend: type[Driver]
+    #: the simulated joints belong to a body of its own (see SimDriver)
+    simulates_body = True
 
     @classmethod
     def param_specs(cls, model) -> list[ParamSpec]:
@@ -154,7 +156,9 @@ class SimDrivesDriver(Driver):
 
         return cls.backend.param_specs(model) + SimDriver.param_specs(model) + truth_specs(model)
 
-    def __init__(self, model, params, control_rate: float):
+    def __init__(self, model, params, control_rate: float, body=None):
+        """``body``: the simulated robot's nominal description (see
+        :class:`~holonomic_sim.sim_driver.SimDriver`); default ``model``."""
         from holonomic_sim.sim_driver import SimDriver
 
         super().__init__(model, params, control_rate)
@@ -167,7 +171,7 @@ class SimDrivesDriver(Driver):
         own[f"{self.name}.interface"] = "virtual"
         own[f"{self.name}.channel"] = self.channel
         self.can = self.backend(model, own, control_rate)
-        self.sim = SimDriver(model, params, control_rate)
+        self.sim = SimDriver(model, params, control_rate, body=body)
         prefix = f"{self.name}.joints"
         self.true_gear_ratios, self.true_directions = [], []
         for joint in model.joint_names:
