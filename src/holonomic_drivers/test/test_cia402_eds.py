@@ -50,11 +50,11 @@ RPM = {f"cia402.joints.{j}.velocity_resolution": 60.0 for j in JOINTS}
 def rig_factory():
     rigs = []
 
-    def make(eds: str, **overrides) -> CanRig:
+    def make(eds: str, drive_eds: str | None = None, **overrides) -> CanRig:
         params = dict(RELAXED)
         params["cia402.eds"] = str(DATA / eds)
         params.update(overrides)
-        rig = CanRig("cia402", "hamr", **params)
+        rig = CanRig("cia402", "hamr", drive_eds=drive_eds, **params)
         rigs.append(rig)
         return rig
 
