@@ -555,7 +555,8 @@ class Cia402Driver(CanDriver):
         try:
             (device_type,) = struct.unpack("<I", node.sdo.upload(co.DEVICE_TYPE, 0)[:4])
         except canopen.SdoAbortedError as exc:
-            raise SdoRefused(f"refused the SDO read of {self._object_name(first, co.DEVICE_TYPE, 0)}",
+            raise SdoRefused("refused the SDO read of "
+                             f"{self._object_name(first, co.DEVICE_TYPE, 0)}",
                              exc.code, device) from exc
         except canopen.SdoCommunicationError as exc:
             raise DriverCommunicationError(

@@ -97,8 +97,9 @@ def test_a_drive_whose_0x6007_defaults_to_0_stops_when_the_controller_dies(
     (no more reads: no master heartbeat), each drive's heartbeat consumer
     expires after drive_watchdog (0.25 s) and the drive does what 0x6007
     says: FAULT, or QUICK STOP ACTIVE -- the motors stop either way."""
-    rig = rig_factory("abort_connection_zero.eds",
-                      **{"cia402.drive_watchdog_reaction": reaction})
+    # (fault is the default: no override, as a user's config would have it)
+    rig = rig_factory("abort_connection_zero.eds", **(
+        {} if reaction == "fault" else {"cia402.drive_watchdog_reaction": reaction}))
     rig.driver.configure()
     last = final_values(sdo_writes(rig.sniff(), 1))
     assert last[(0x6007, 0)] == code
