@@ -58,10 +58,13 @@ def test_rpdos_with_bit_30_go_out_on_the_11_bit_id_and_move_the_motors(rig_facto
 
 
 def test_rpdo_bit_30_drives_leave_operation_enabled_on_deactivate(rig_factory):
+    """Arming walks the state machine over SDO; disarming is "disable
+    operation" in the velocity RPDO: it reaches the drive only on its 11-bit
+    identifier (sent elsewhere, the drives stayed OPERATION ENABLED)."""
     rig = rig_factory("rpdo_no_rtr.eds")
     rig.driver.configure()
     rig.driver.activate()
-    run_until(rig, motors_at_command(rig), velocities=COMMAND)
+    assert all(d.state() is State.OPERATION_ENABLED for d in rig.devices)
     rig.driver.deactivate()
     wait_until(lambda: all(d.state() is State.SWITCHED_ON for d in rig.devices), 5.0,
                "disable operation")
