@@ -33,6 +33,8 @@ BRINGUP = [
     (["hamr", "-p", "safety.glitch_rate:=-1"], "'safety.glitch_rate' = -1"),
     (["hamr", "-p", "safety.glitch_rate:=often"],
      "'safety.glitch_rate' = 'often': expected a number"),
+    (["hamr", "--driver", "cia402", "-p", "cia402.drive_watchdog_reaction:=coast"],
+     "'cia402.drive_watchdog_reaction' = 'coast': expected one of"),
     (["hamr", "--namespace", "my robot"], "'my robot' is not a ROS namespace"),
     (["hamr", "--namespace", "1abc"], "'1abc' is not a ROS namespace"),
     (["hamr", "--params-file", "/nonexistent/params.yaml"], "--params-file: no such file"),
