@@ -4,7 +4,8 @@ Each :meth:`BaseController.step` (called by the fixed-rate loop thread):
 
 1. applies pending requests (arm, disarm, reset odometry) -- driver calls
    only ever happen in the loop thread;
-2. reads the driver and integrates odometry;
+2. reads the driver, checks the reading (an isolated invalid one may be
+   dropped: :mod:`holonomic_core.glitch_policy`) and integrates odometry;
 3. picks the target twist: the latest command, or zero when disarmed, when
    the command is stale (older than ``cmd_timeout``) or when it was
    rejected as non-finite;
@@ -245,7 +246,9 @@ class BaseController:
         commands from elsewhere (the control loop process's command pipe) hands
         over the newest (:meth:`set_command`) as late as the cycle allows,
         at a fixed point of every cycle. Not called on a cycle whose reading
-        failed or was implausible (the caller then takes the command itself)."""
+        failed or was implausible (the caller then takes the command itself);
+        called on one whose invalid reading was dropped (safety.glitch_policy:
+        that cycle commands from the last good reading)."""
         self.counters["cycles"] += 1
         self._process_requests()
         try:
