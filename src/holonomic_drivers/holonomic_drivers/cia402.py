@@ -724,6 +724,10 @@ class Cia402Driver(CanDriver):
                         else self._drives[i].emcy_code)
                 raise DriverFault(f"fault persists after fault reset (error code 0x{code:04X})",
                                   device)
+        elif state is State.QUICK_STOP_ACTIVE:
+            # e.g. its watchdog's quick stop (0x6007 = 3): CiA 402 leaves QUICK
+            # STOP ACTIVE only by "disable voltage" (transition 12)
+            self._write(i, co.CONTROLWORD, Control.DISABLE_VOLTAGE)
         self._write(i, co.TARGET_VELOCITY, 0)
         if self._in_torque[i]:
             # every arming starts in the configured velocity mode, target 0

@@ -555,6 +555,10 @@ class EmulatedCia402Drive:
         if self._life_time > 0 and last_guard is not None and now - last_guard > self._life_time:
             expired = True
         if expired:
+            # CiA 301: after the event, the monitoring waits for the next
+            # heartbeat (guarding request) before it can expire again
+            self._master_heartbeat = None
+            self._guarding.last_request = None
             for axis in self.axes:
                 self._lost_connection(axis)
 

@@ -99,7 +99,8 @@ def test_a_drive_whose_0x6007_defaults_to_0_stops_when_the_controller_dies(
     writes 0x6007 = 1 (fault) or 3 (quick stop); when the controller stops
     (no more reads: no master heartbeat), each drive's heartbeat consumer
     expires after drive_watchdog (0.25 s) and the drive does what 0x6007
-    says: FAULT, or QUICK STOP ACTIVE -- the motors stop either way."""
+    says: FAULT, or QUICK STOP ACTIVE -- the motors stop either way; and the
+    controller, back, can arm them again."""
     # (fault is the default: no override, as a user's config would have it)
     rig = rig_factory("abort_connection_zero.eds", **(
         {} if reaction == "fault" else {"cia402.drive_watchdog_reaction": reaction}))
@@ -111,6 +112,11 @@ def test_a_drive_whose_0x6007_defaults_to_0_stops_when_the_controller_dies(
     run_until(rig, motors_at_command(rig), velocities=COMMAND)
     wait_until(lambda: all(d.state() is state for d in rig.devices), 5.0, "watchdog reaction")
     wait_until(lambda: all(d.velocity_rev_per_s == 0.0 for d in rig.devices), what="standstill")
+    # the controller back: arming brings the drives out of FAULT (fault reset)
+    # or QUICK STOP ACTIVE (disable voltage first) to OPERATION ENABLED again
+    rig.driver.deactivate()
+    rig.driver.activate()
+    assert all(d.state() is State.OPERATION_ENABLED for d in rig.devices)
 
 
 def test_a_read_only_0x6007_is_warned_about_and_the_drive_keeps_turning(rig_factory):
