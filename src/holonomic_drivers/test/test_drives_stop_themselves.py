@@ -92,15 +92,16 @@ def test_rpdo_bit_30_drives_stop_when_another_drive_faults(rig_factory):
 # -- 0x6007: what a drive does when it loses the controller --------------------------------
 
 @pytest.mark.parametrize("reaction, code, state", [("fault", 1, State.FAULT),
-                                                    ("quick_stop", 3, State.QUICK_STOP_ACTIVE)])
+                                                    ("quick_stop", 3, State.SWITCH_ON_DISABLED)])
 def test_a_drive_whose_0x6007_defaults_to_0_stops_when_the_controller_dies(
         rig_factory, reaction, code, state):
     """abort_connection_zero.eds: 0x6007 = 0 (no action), writable. The driver
     writes 0x6007 = 1 (fault) or 3 (quick stop); when the controller stops
     (no more reads: no master heartbeat), each drive's heartbeat consumer
     expires after drive_watchdog (0.25 s) and the drive does what 0x6007
-    says: FAULT, or QUICK STOP ACTIVE -- the motors stop either way; and the
-    controller, back, can arm them again."""
+    says: FAULT, or QUICK STOP ACTIVE and, at rest, SWITCH ON DISABLED (their
+    quick stop option code 0x605A is 2) -- the motors stop either way, and
+    not in OPERATION ENABLED; and the controller, back, can arm them again."""
     # (fault is the default: no override, as a user's config would have it)
     rig = rig_factory("abort_connection_zero.eds", **(
         {} if reaction == "fault" else {"cia402.drive_watchdog_reaction": reaction}))
@@ -110,8 +111,8 @@ def test_a_drive_whose_0x6007_defaults_to_0_stops_when_the_controller_dies(
     assert not rig.driver.warnings
     rig.driver.activate()
     run_until(rig, motors_at_command(rig), velocities=COMMAND)
-    wait_until(lambda: all(d.state() is state for d in rig.devices), 5.0, "watchdog reaction")
     wait_until(lambda: all(d.velocity_rev_per_s == 0.0 for d in rig.devices), what="standstill")
+    wait_until(lambda: all(d.state() is state for d in rig.devices), 5.0, "watchdog reaction")
     # the controller back: arming brings the drives out of FAULT (fault reset)
     # or QUICK STOP ACTIVE (disable voltage first) to OPERATION ENABLED again
     rig.driver.deactivate()
