@@ -573,6 +573,9 @@ class BaseControllerNode(Node):
         values["controller_state"] = status.state.value
         values["driver_errors"] = str(status.driver_errors)
         values["implausible_readings"] = str(status.implausible_readings)
+        values["dropped_readings"] = str(status.dropped_readings)
+        if status.last_dropped:
+            values["last_dropped"] = status.last_dropped
         if status.fault:
             values["fault"] = status.fault
         return self._status_msg(f"{NODE_NAME}: driver", level, status.fault or

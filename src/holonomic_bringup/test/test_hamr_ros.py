@@ -176,6 +176,9 @@ def test_odometry_message_tf_joint_states_and_diagnostics(hamr, ros):
         loop = next(s for s in hamr.diagnostics.status if s.name.endswith("control loop"))
         rate = float(next(kv.value for kv in loop.values if kv.key == "rate_hz"))
         assert rate == pytest.approx(200.0, rel=0.05)
+        # the glitch policy's count (safety.glitch_policy drop): none on the simulator
+        driver = next(s for s in hamr.diagnostics.status if s.name.endswith(": driver"))
+        assert {kv.key: kv.value for kv in driver.values}["dropped_readings"] == "0"
     finally:
         for sub in subs:
             ros.destroy_subscription(sub)

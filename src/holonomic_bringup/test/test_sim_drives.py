@@ -100,6 +100,8 @@ def test_the_can_driver_drives_the_simulated_base_and_odometry_matches_ground_tr
     rig.arm()
     rig.run(2.0, (0.3, 0.0, 0.0))
     assert rig.controller.state is ControllerState.ARMED, rig.controller.fault
+    # not one reading the glitch policy dropped (a false glitch would be one)
+    assert rig.controller.status().dropped_readings == 0, rig.controller.status().last_dropped
     truth = rig.driver.ground_truth().pose
     odom = rig.controller.odometry.pose
     # 0.3 m/s for 2 s after a 0.3 s ramp at 1 m/s^2 (hamr.yaml): 0.3 (2 - 0.15)

@@ -33,6 +33,7 @@ import yaml
 from holonomic_core import plugins
 from holonomic_core.description import Description, description_class
 from holonomic_core.drift_watch import DRIFT_SPECS
+from holonomic_core.glitch_policy import POLICIES as GLITCH_POLICIES, GlitchLimits
 from holonomic_core.driver import driver_class, driver_names, sim_drives_driver
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics, kinematics_class
 from holonomic_core.loop import LOOP_SPECS
@@ -221,6 +222,20 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "How long a joint may miss its command by safety.tracking_error before the "
               "controller faults [s]; 0 disables the check.",
               default=0.5, minimum=0.0, maximum=60.0),
+    # drop by default: one 4000 rad/s spike every few hours must not stop a robot,
+    # while a dead encoder (invalid on every cycle) passes glitch_rate within
+    # glitch_rate + 1 cycles, or safety.reading_timeout, and faults
+    ParamSpec("safety.glitch_policy", "string",
+              "What an invalid joint reading (non-finite value, velocity over "
+              "safety.velocity_factor x the limit, position jump) does: fault (fault and "
+              "stop) or drop (ignore it, count it in diagnostics; the odometry bridges it), "
+              "unless more than safety.glitch_rate were dropped in the last minute or they "
+              "last longer than safety.reading_timeout.",
+              default="drop", choices=GLITCH_POLICIES),
+    ParamSpec("safety.glitch_rate", "double",
+              "With safety.glitch_policy drop: dropped readings per minute above which the "
+              "next invalid reading faults [1/min].",
+              default=10.0, minimum=0.0, maximum=600.0),
 ] + _limit_specs() + DRIFT_SPECS + LOOP_SPECS
 
 
@@ -249,6 +264,7 @@ class ControllerConfig:
     twist_window: float
     monitor: MonitorLimits
     slip: SlipLimits
+    glitch: GlitchLimits
 
     @classmethod
     def from_values(cls, v: Mapping[str, Any]) -> "ControllerConfig":
@@ -289,6 +305,8 @@ class ControllerConfig:
             slip=SlipLimits(v["diagnostics.slip_threshold"], v["diagnostics.slip_duration"]),
             monitor=MonitorLimits(v["safety.velocity_factor"], v["safety.reading_timeout"],
                                   v["safety.tracking_error"], v["safety.tracking_timeout"]),
+            glitch=GlitchLimits(v["safety.glitch_policy"], v["safety.glitch_rate"],
+                                v["safety.reading_timeout"]),
         )
 
 

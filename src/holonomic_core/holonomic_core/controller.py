@@ -4,7 +4,8 @@ Each :meth:`BaseController.step` (called by the fixed-rate loop thread):
 
 1. applies pending requests (arm, disarm, reset odometry) -- driver calls
    only ever happen in the loop thread;
-2. reads the driver and integrates odometry;
+2. reads the driver, checks the reading (an isolated invalid one may be
+   dropped: :mod:`holonomic_core.glitch_policy`) and integrates odometry;
 3. picks the target twist: the latest command, or zero when disarmed, when
    the command is stale (older than ``cmd_timeout``) or when it was
    rejected as non-finite;
@@ -32,6 +33,7 @@ import numpy as np
 
 from holonomic_core.config import RobotConfig
 from holonomic_core.drift_watch import DriftWatch
+from holonomic_core.glitch_policy import GlitchPolicy
 from holonomic_core.driver import Driver, DriverError, DriverFault, DriverState, JointReading
 from holonomic_core.limits import TwistLimiter, is_finite_twist, joint_rate_saturation
 from holonomic_core.monitor import ReadingMonitor
@@ -77,6 +79,8 @@ class ControllerStatus:
     drift_findings: tuple[str, ...] | None    #: None: no drift watch for this robot
     drift_judged: bool                   #: the drift watch has enough motion to judge
     drift_values: Mapping[str, str]
+    dropped_readings: int = 0            #: invalid readings dropped (safety.glitch_policy)
+    last_dropped: str | None = None      #: why the last one was
 
 
 #: how far back a command while disarmed makes the status say so [s]
@@ -109,6 +113,7 @@ class BaseController:
                                         c.slip)
         self.monitor = ReadingMonitor(self.model.joint_names, self.model.max_joint_velocity,
                                       self.dt, c.monitor)
+        self.glitches = GlitchPolicy(c.glitch)
         self._clock = clock
         self._max_rates = self.model.max_joint_velocity
         # compiled or pure, as the limiter, kinematics and odometry (hot_path)
@@ -229,7 +234,8 @@ class BaseController:
             slip_threshold=self.slip_monitor.limits.threshold,
             drift_findings=None if self.drift is None else tuple(self.drift.findings()),
             drift_judged=self.drift is not None and self.drift.error is not None,
-            drift_values={} if self.drift is None else dict(self.drift.values()))
+            drift_values={} if self.drift is None else dict(self.drift.values()),
+            dropped_readings=self.glitches.dropped, last_dropped=self.glitches.last)
 
     # -- the cycle (loop thread) ----------------------------------------------------
     def step(self, take_command: Callable[[], None] | None = None) -> bool:
@@ -240,7 +246,9 @@ class BaseController:
         commands from elsewhere (the control loop process's command pipe) hands
         over the newest (:meth:`set_command`) as late as the cycle allows,
         at a fixed point of every cycle. Not called on a cycle whose reading
-        failed or was implausible (the caller then takes the command itself)."""
+        failed or was implausible (the caller then takes the command itself);
+        called on one whose invalid reading was dropped (safety.glitch_policy:
+        that cycle commands from the last good reading)."""
         self.counters["cycles"] += 1
         self._process_requests()
         try:
@@ -255,6 +263,18 @@ class BaseController:
                                           positions=reading.positions + self._zero_corrections)
         problem = self.monitor.check(reading, self._clock(),
                                      self.joint_command if self.driver.armed else None)
+        if problem is None:
+            self.glitches.good()
+        elif self.fault is None:
+            # None: dropped (safety.glitch_policy), else the fault's message
+            problem = self.glitches.judge(problem, self._clock())
+            if problem is None:
+                if self.reading is None:
+                    return False                # nothing good to command from yet
+                # the odometry keeps its last good reading as the reference: the
+                # next good one integrates the whole motion since then, as one
+                # arc; this cycle commands from the last good reading
+                reading = None
         if problem is not None:
             # keep the bad sample out of the odometry: the next good reading
             # becomes its new reference (the pose is kept)
@@ -263,11 +283,14 @@ class BaseController:
                 self.counters["implausible_readings"] += 1
                 self._on_fault(DriverFault(problem))
             return False
-        self.reading = reading
-        if self.odometry.update(reading.positions, reading.stamp):
-            self.slip_monitor.update(self.odometry.residual, reading.stamp)
-        if self.drift is not None:
-            self.drift.update(reading.stamp, reading.positions)
+        if reading is None:
+            reading = self.reading
+        else:
+            self.reading = reading
+            if self.odometry.update(reading.positions, reading.stamp):
+                self.slip_monitor.update(self.odometry.residual, reading.stamp)
+            if self.drift is not None:
+                self.drift.update(reading.stamp, reading.positions)
         if take_command is not None:
             take_command()
 
@@ -379,6 +402,7 @@ class BaseController:
         # A fault is cleared only if the driver answers again, plausibly.
         reading = self.driver.read()
         self.monitor.reset()
+        self.glitches.reset()
         problem = self.monitor.check(reading, self._clock())
         if problem is not None:
             raise DriverFault(problem)

@@ -7,7 +7,8 @@ a motor that cannot follow its command because it is saturated or blocked.
 :class:`ReadingMonitor` checks every reading before odometry or control uses
 it and returns a message naming the joint when one is implausible; the
 controller then faults, stops the base and keeps the bad sample out of the
-odometry.
+odometry -- or, for an isolated invalid value (a :class:`Glitch`), drops it
+as ``safety.glitch_policy`` says (:mod:`holonomic_core.glitch_policy`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from holonomic_core import hot_path
+from holonomic_core.glitch_policy import Glitch
 
 
 @dataclass(frozen=True)
@@ -128,28 +130,32 @@ class ReadingMonitor:
         return max(dt, self.period, max(self._gaps, default=0.0))
 
     def _check_joints(self, pos: list, vel: list, dt: float | None) -> str | None:
-        """The per-joint tests (finite, speed, position jump when ``dt`` >= 0)."""
+        """The per-joint tests (finite, speed, position jump when ``dt`` >= 0);
+        a failure is a :class:`Glitch` (the glitch policy may drop it)."""
         n = len(self.joint_names)
         isfinite = math.isfinite
         for i in range(n):
             if not isfinite(pos[i]):
-                return f"{self.joint_names[i]}: non-finite position reading ({pos[i]})"
+                return Glitch(f"{self.joint_names[i]}: non-finite position reading ({pos[i]})",
+                              self.joint_names[i])
             if not isfinite(vel[i]):
-                return f"{self.joint_names[i]}: non-finite velocity reading ({vel[i]})"
+                return Glitch(f"{self.joint_names[i]}: non-finite velocity reading ({vel[i]})",
+                              self.joint_names[i])
         bound = self._bound
         for i in range(n):
             if abs(vel[i]) > bound[i]:
-                return (f"{self.joint_names[i]}: velocity reading {vel[i]:.4g} rad/s is over "
-                        f"{self.limits.velocity_factor:g}x its limit "
-                        f"({self.max_velocity[i]:g} rad/s): encoder glitch")
+                return Glitch(f"{self.joint_names[i]}: velocity reading {vel[i]:.4g} rad/s is "
+                              f"over {self.limits.velocity_factor:g}x its limit "
+                              f"({self.max_velocity[i]:g} rad/s): encoder glitch",
+                              self.joint_names[i])
         if dt is not None and dt >= 0.0:
             span = self._span(dt)
             last = self._last_positions
             for i in range(n):
                 jump = abs(pos[i] - last[i])
                 if jump > bound[i] * span + 1e-6:
-                    return (f"{self.joint_names[i]}: position jumped by {jump:.4g} rad in "
-                            f"{dt:.4g} s: encoder glitch")
+                    return Glitch(f"{self.joint_names[i]}: position jumped by {jump:.4g} rad "
+                                  f"in {dt:.4g} s: encoder glitch", self.joint_names[i])
         return None
 
     def _accept(self, positions: list, stamp, now) -> None:

@@ -48,6 +48,15 @@ CASES = [
      "estimator", "one of"),
     ("typo in a key", mutate(r"cmd_timeout: 0.5", "cmd_timout: 0.5"),
      "cmd_timout", "no such parameter"),
+    ("unknown glitch policy", mutate(r"cmd_timeout: 0.5", "cmd_timeout: 0.5\n    safety: "
+                                     "{glitch_policy: ignore}"),
+     "safety.glitch_policy", "one of"),
+    ("negative glitch rate", mutate(r"cmd_timeout: 0.5", "cmd_timeout: 0.5\n    safety: "
+                                    "{glitch_rate: -1.0}"),
+     "safety.glitch_rate", "[0, 600]"),
+    ("glitch rate over 10 a second", mutate(r"cmd_timeout: 0.5", "cmd_timeout: 0.5\n    "
+                                            "safety: {glitch_rate: 601}"),
+     "safety.glitch_rate", "[0, 600]"),
     ("physics not a multiple of control", mutate(r"physics_rate: 1000.0", "physics_rate: 1100.0"),
      "sim.physics_rate", "integer multiple"),
     ("section that is not a mapping", mutate(r"^    ddrot:\n(.*\n){3}", "    ddrot: 5\n"),

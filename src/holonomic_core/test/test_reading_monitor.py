@@ -55,7 +55,9 @@ class CorruptibleMock(MockDriver):
 
 @pytest.fixture
 def moving():
-    ctrl, driver, clock = make(CorruptibleMock)
+    # safety.glitch_policy fault: every invalid reading faults (test_glitch_policy.py
+    # has drop, the default)
+    ctrl, driver, clock = make(CorruptibleMock, **{"safety.glitch_policy": "fault"})
     arm(ctrl, clock)
     for _ in range(200):
         ctrl.set_command((0.4, 0.0, 0.0))

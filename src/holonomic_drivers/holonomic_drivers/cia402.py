@@ -26,7 +26,11 @@ SDO, each step checked), per device:
   guarding requests and the drive's answers count as its heartbeat);
   without either, a warning that the drive will not stop by itself if the
   controller dies. Either way a dead or hung controller faults the drives
-  and they stop on their own;
+  and they stop on their own: the abort connection option code 0x6007
+  (CiA 402: what the drive does when it detects the loss; 0 = nothing) is
+  written per axis with ``cia402.drive_watchdog_reaction`` (fault: 1, quick
+  stop: 3), and where the file has no 0x6007 or the drive refuses the write,
+  a warning (log and diagnostics) says the reaction is the drive's own;
 
 and per axis:
 
@@ -84,10 +88,12 @@ from holonomic_drivers.can_link import CanDriver, bus_specs, joint_map_specs, op
 from holonomic_drivers.cia402_dictionary import (MAX_AXES, SI_VELOCITY_UNITS, AxisObjects,
                                                  DictionaryError, generic_dictionary,
                                                  load_dictionary, mode_bit, mode_names)
-from holonomic_drivers.cia402_protocol import Control, OpMode, State
+from holonomic_drivers.cia402_protocol import Control, OpMode, State, sdo_abort_text
 
 PREFIX = "cia402"
 _MODES = {"csv": OpMode.CYCLIC_SYNCHRONOUS_VELOCITY, "pv": OpMode.PROFILE_VELOCITY}
+#: cia402.drive_watchdog_reaction -> 0x6007
+_REACTIONS = {"fault": co.AbortConnection.FAULT, "quick_stop": co.AbortConnection.QUICK_STOP}
 #: [s] how far back the SYNCs sent are kept to place a late-handled answer
 SYNC_RECORD = 2.0
 _log = logging.getLogger(__name__)
@@ -102,6 +108,15 @@ TX_STATUS = ((co.STATUSWORD, 0), (co.ERROR_CODE, 0))
 #: objects a velocity-controlled axis cannot do without
 _REQUIRED = (co.CONTROLWORD, co.STATUSWORD, co.MODES_OF_OPERATION, co.MODES_DISPLAY,
              co.POSITION_ACTUAL, co.VELOCITY_ACTUAL, co.TARGET_VELOCITY)
+
+
+class SdoRefused(DriverFault):
+    """The drive aborted an SDO transfer (CiA 301 abort ``code``); the
+    message names the joint, node, object and code."""
+
+    def __init__(self, message: str, code: int, device: str):
+        self.code = code
+        super().__init__(f"{message}: abort code {sdo_abort_text(code)}", device)
 
 
 @dataclass(frozen=True)
@@ -264,6 +279,7 @@ class Cia402Driver(CanDriver):
         self._feedback_timeout = float(p("feedback_timeout"))
         self._startup_timeout = float(p("startup_timeout"))
         self._watchdog = float(p("drive_watchdog"))
+        self._reaction = _REACTIONS[p("drive_watchdog_reaction")]
         self._sdo_timeout = float(p("sdo_timeout"))
         counts, vel_units = [], []
         for joint in model.joint_names:
@@ -297,10 +313,13 @@ class Cia402Driver(CanDriver):
                 velocity = next(rx)
                 torque_pdo = next(rx) if torque else None
                 feedback, status = next(tx), next(tx)
-                self._wiring[i] = _Wiring(self._objects[i], plan.rx_cob[velocity],
-                                          None if torque_pdo is None else plan.rx_cob[torque_pdo],
-                                          plan.tx_cob[feedback] & 0x7FF,
-                                          plan.tx_cob[status] & 0x7FF,
+                # the frames go out on the 11-bit identifier (CiA 301: bits 29..31
+                # of the COB-ID entry are flags, not part of the identifier)
+                self._wiring[i] = _Wiring(self._objects[i], plan.rx_cob[velocity] & co.PDO_ID_11,
+                                          None if torque_pdo is None
+                                          else plan.rx_cob[torque_pdo] & co.PDO_ID_11,
+                                          plan.tx_cob[feedback] & co.PDO_ID_11,
+                                          plan.tx_cob[status] & co.PDO_ID_11,
                                           plan.tx[feedback], plan.tx[status])
         self._drives = [_Drive() for _ in self.devices]
         #: rated motor torque [N m] per drive (0: no cyclic synchronous torque)
@@ -444,6 +463,13 @@ class Cia402Driver(CanDriver):
                       "stops [s]: heartbeat consumer 0x1016 on this master's heartbeat, or on "
                       "drives without it node guarding (life time 0x100C x 0x100D); 0 "
                       "leaves both alone.", default=0.25, minimum=0.0, maximum=60.0),
+            ParamSpec(f"{PREFIX}.drive_watchdog_reaction", "string",
+                      "What each drive does when its watchdog (cia402.drive_watchdog) finds "
+                      "this controller gone, written to its abort connection option code "
+                      "0x6007: fault (1: its fault reaction 0x605E, then FAULT) or quick_stop "
+                      "(3: its quick stop ramp 0x6085, then as 0x605A says); a drive without "
+                      "a writable 0x6007 keeps its own, with a warning.",
+                      default="fault", choices=tuple(_REACTIONS)),
             ParamSpec(f"{PREFIX}.startup_timeout", "double",
                       "How long configure waits for the first PDOs and arming for each "
                       "state transition [s].", default=2.0, minimum=0.05, maximum=60.0),
@@ -480,12 +506,14 @@ class Cia402Driver(CanDriver):
             raise
 
     def _download(self, i: int, index: int, sub: int, data: bytes) -> None:
-        """One SDO write to joint ``i``'s device; a refusal names object and value."""
+        """One SDO write to joint ``i``'s device; a refusal (SdoRefused) names
+        the joint, node, object and abort code."""
         try:
             self._nodes[self.joints.node_ids[i]].sdo.download(index, sub, data)
         except canopen.SdoAbortedError as exc:
-            raise DriverFault(f"refused 0x{index:04X}:{sub} = {data.hex()} ({exc})",
-                              self.devices[i]) from exc
+            raise SdoRefused(f"refused the SDO write of {self._object_name(i, index, sub)} = "
+                             f"0x{data[::-1].hex().upper()}", exc.code,
+                             self.devices[i]) from exc
         except canopen.SdoCommunicationError as exc:
             raise DriverCommunicationError(f"no answer to the SDO write of 0x{index:04X}:{sub} "
                                            f"({exc})", self.devices[i]) from exc
@@ -495,11 +523,25 @@ class Cia402Driver(CanDriver):
         objects = self._objects[i]
         try:
             data = self._nodes[self.joints.node_ids[i]].sdo.upload(objects.index(index), sub)
+        except canopen.SdoAbortedError as exc:
+            # a sibling of SdoCommunicationError in canopen, not a subclass
+            raise SdoRefused(f"refused the SDO read of "
+                             f"{self._object_name(i, objects.index(index), sub)}", exc.code,
+                             self.devices[i]) from exc
         except canopen.SdoCommunicationError as exc:
             raise DriverCommunicationError(f"no answer to the SDO read of "
                                            f"0x{objects.index(index):04X}:{sub} ({exc})",
                                            self.devices[i]) from exc
         return objects.decode(index, sub, data)
+
+    def _object_name(self, i: int, index: int, sub: int) -> str:
+        """``0x6076:0 (Motor rated torque)``: an absolute index of joint ``i``'s
+        device, named as its dictionary names it where it has it."""
+        try:
+            var = self._objects[i].od.get_variable(index, sub)
+        except (KeyError, TypeError):
+            var = None
+        return f"0x{index:04X}:{sub}" + (f" ({var.name})" if var is not None else "")
 
     def _write(self, i: int, index: int, value, sub: int = 0) -> None:
         """Joint ``i``'s axis object (profile index) written by SDO in its own type."""
@@ -512,6 +554,10 @@ class Cia402Driver(CanDriver):
         node.nmt.send_command(co.NmtCommand.ENTER_PRE_OPERATIONAL)
         try:
             (device_type,) = struct.unpack("<I", node.sdo.upload(co.DEVICE_TYPE, 0)[:4])
+        except canopen.SdoAbortedError as exc:
+            raise SdoRefused("refused the SDO read of "
+                             f"{self._object_name(first, co.DEVICE_TYPE, 0)}",
+                             exc.code, device) from exc
         except canopen.SdoCommunicationError as exc:
             raise DriverCommunicationError(
                 f"no answer to SDO ({exc}): is it powered, on this bus, with this node id "
@@ -542,12 +588,44 @@ class Cia402Driver(CanDriver):
                            "guarding (0x100C/0x100D): it will NOT stop by itself if this "
                            "controller dies or hangs")
         for i in joints:
+            if kind != "none":
+                self._set_watchdog_reaction(i)
             self._write(i, co.MODES_OF_OPERATION, int(self._mode))
             self._write(i, co.TARGET_VELOCITY, 0)
         for index, sub, data in self._plans[node_id].writes():
             self._download(first, index, sub, data)
         for i in joints:
             self._check_axis(i)
+
+    def _set_watchdog_reaction(self, i: int) -> None:
+        """0x6007 = cia402.drive_watchdog_reaction on joint ``i``'s axis, or a
+        warning where the file has no 0x6007, the file makes it read-only or
+        the drive refuses the write (what it then does is its own, read back
+        where it can be)."""
+        objects = self._objects[i]
+        wanted = f"{self.params[f'{PREFIX}.drive_watchdog_reaction']} ({int(self._reaction)})"
+        if not objects.has(co.ABORT_CONNECTION_OPTION):
+            self._warn(i, "has no abort connection option code 0x6007: what it does when its "
+                       f"watchdog finds this controller gone is its maker's choice, not "
+                       f"{wanted}")
+            return
+        var = objects.variable(co.ABORT_CONNECTION_OPTION)
+        refused = None
+        if var.writable:
+            try:
+                self._write(i, co.ABORT_CONNECTION_OPTION, int(self._reaction))
+                return
+            except SdoRefused as exc:
+                refused = exc
+        try:
+            current = f"it reads {self._upload(i, co.ABORT_CONNECTION_OPTION)}"
+        except SdoRefused as exc:
+            current = f"its value cannot be read ({sdo_abort_text(exc.code)})"
+        why = (f"refused the write of 0x6007 = {int(self._reaction)} "
+               f"({sdo_abort_text(refused.code)})" if refused is not None
+               else "has a read-only abort connection option code 0x6007")
+        self._warn(i, f"{why}; {current} (0: no action): its reaction to losing this "
+                   f"controller is not {wanted}")
 
     def _watchdog_plan(self, objects: AxisObjects) -> str:
         if self._watchdog <= 0:
@@ -581,7 +659,7 @@ class Cia402Driver(CanDriver):
         if objects.has(co.MOTOR_RATED_TORQUE):
             try:
                 rated = self._upload(i, co.MOTOR_RATED_TORQUE)
-            except canopen.SdoAbortedError:
+            except SdoRefused:
                 rated = 0                   # no 0x6076: no torque mode
         cst = supported is not None and supported & mode_bit(OpMode.CYCLIC_SYNCHRONOUS_TORQUE)
         torque_pdo = self._wiring[i].rx_torque is not None
@@ -646,6 +724,10 @@ class Cia402Driver(CanDriver):
                         else self._drives[i].emcy_code)
                 raise DriverFault(f"fault persists after fault reset (error code 0x{code:04X})",
                                   device)
+        elif state is State.QUICK_STOP_ACTIVE:
+            # e.g. its watchdog's quick stop (0x6007 = 3): CiA 402 leaves QUICK
+            # STOP ACTIVE only by "disable voltage" (transition 12)
+            self._write(i, co.CONTROLWORD, Control.DISABLE_VOLTAGE)
         self._write(i, co.TARGET_VELOCITY, 0)
         if self._in_torque[i]:
             # every arming starts in the configured velocity mode, target 0

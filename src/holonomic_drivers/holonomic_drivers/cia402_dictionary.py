@@ -169,10 +169,13 @@ class AxisObjects:
         return sum(1 for sub in record if sub != 0)
 
     def cob_id_flags(self, comm_index: int) -> int:
-        """Bits 29..30 of a PDO's COB-ID as the file sets them by default
-        (bit 30: no RTR allowed on this PDO; bit 29: 29-bit identifier)."""
+        """Bit 30 of a PDO's COB-ID as the file sets it by default (CiA 301:
+        no RTR allowed on this PDO), to be written back as the file has it.
+        Bit 29 (29-bit identifier) is not kept: the driver configures and
+        uses 11-bit identifiers (bits 0..10); bit 31 is the valid bit, which
+        the set-up sequence itself clears and sets."""
         default = self.default(comm_index, 1)
-        return (int(default) & 0x60000000) if default is not None else 0
+        return (int(default) & co.PDO_NO_RTR) if default is not None else 0
 
     def cob_id_default(self, comm_index: int) -> int | None:
         """The 11-bit CAN identifier that the file gives a PDO, if any."""
@@ -219,7 +222,8 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
                        torque: bool = True, error_code: str = "pdo",
                        watchdog: str = "heartbeat", velocity_unit: int | None = None,
                        pdos: int = 4, rated_torque_mnm: int = 1000,
-                       rtr_not_allowed: bool = False,
+                       rtr_not_allowed: bool = False, rpdo_rtr_bit: bool = False,
+                       abort_connection: tuple[str, int] | None = ("rw", 1),
                        first_pdo_entries: int = 8) -> ObjectDictionary:
     """A CiA 402 drive's object dictionary, built in code.
 
@@ -232,7 +236,10 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
     mappable, "sdo": not mappable, "none": no 0x603F),
     ``watchdog`` ("heartbeat": 0x1016, "guarding": 0x100C/0x100D only,
     "none"), ``velocity_unit`` (0x60A9 value, None: no 0x60A9), ``pdos``,
-    ``rtr_not_allowed`` (bit 30 in the TPDO COB-IDs), ``first_pdo_entries``
+    ``rtr_not_allowed`` (bit 30 in the TPDO COB-IDs), ``rpdo_rtr_bit`` (bit
+    30 in the RPDO COB-IDs too, ``$NODEID+0x40000200``), ``abort_connection``
+    (0x6007: (access, default), e.g. ("rw", 0) or ("ro", 0); None: no 0x6007),
+    ``first_pdo_entries``
     (mapping entries of RPDO1 and TPDO1; the others hold 8) -- which is how the
     tests' EDS files are written (``canopen.export_od``). ``node_id``:
     resolves $NODEID in the COB-ID defaults (None keeps them relative).
@@ -264,7 +271,8 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
         for comm, mapping, base in ((co.RPDO_COMM, co.RPDO_MAP, co.RPDO),
                                     (co.TPDO_COMM, co.TPDO_MAP, co.TPDO)):
             cob = base[k] if k < 4 else 0x80000000
-            flags = (0x40000000 if rtr_not_allowed and base is co.TPDO else 0) | \
+            rtr = rtr_not_allowed and base is co.TPDO or rpdo_rtr_bit and base is co.RPDO
+            flags = (co.PDO_NO_RTR if rtr else 0) | \
                 (0 if k == 0 else co.PDO_INVALID)
             raw = f"$NODEID+0x{cob | flags:X}" if k < 4 else f"0x{cob:X}"
             default = (cob | flags) + (node_id or 0) if k < 4 else cob
@@ -286,6 +294,9 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
         add(_var(co.CONTROLWORD + o, 0, "Controlword", u16, "rww", 0, mappable=True))
         add(_var(co.STATUSWORD + o, 0, "Statusword", u16, "ro", 0, mappable=True))
         add(_var(co.QUICK_STOP_OPTION + o, 0, "Quick stop option code", dt.INTEGER16, "rw", 2))
+        if abort_connection is not None:
+            add(_var(co.ABORT_CONNECTION_OPTION + o, 0, "Abort connection option code",
+                     dt.INTEGER16, *abort_connection))
         add(_var(co.MODES_OF_OPERATION + o, 0, "Modes of operation", dt.INTEGER8, "rww", 0,
                  mappable=True))
         add(_var(co.MODES_DISPLAY + o, 0, "Modes of operation display", dt.INTEGER8, "ro", 0,

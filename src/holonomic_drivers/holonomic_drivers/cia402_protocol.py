@@ -18,7 +18,11 @@ RPDO = (0x200, 0x300, 0x400, 0x500)   # + node id
 SDO_TX = 0x580      # server -> client, + node id
 SDO_RX = 0x600      # client -> server, + node id
 HEARTBEAT = 0x700   # + node id
-PDO_INVALID = 0x80000000              # COB-ID bit 31: PDO disabled
+# PDO COB-ID entries (0x1400.., 0x1800.. sub 1), CiA 301:
+PDO_INVALID = 0x80000000              # COB-ID bit 31: PDO not valid
+PDO_NO_RTR = 0x40000000               # bit 30: no remote frame (RTR) allowed on this PDO
+PDO_EXTENDED = 0x20000000             # bit 29: 29-bit identifier (0: 11-bit)
+PDO_ID_11 = 0x7FF                     # bits 0..10: the 11-bit CAN identifier
 
 
 class NmtCommand(enum.IntEnum):
@@ -52,6 +56,7 @@ TPDO_MAP = 0x1A00
 ERROR_CODE = 0x603F             # u16
 CONTROLWORD = 0x6040            # u16
 STATUSWORD = 0x6041             # u16
+ABORT_CONNECTION_OPTION = 0x6007    # i16: what the drive does on a lost connection
 QUICK_STOP_OPTION = 0x605A      # i16
 MODES_OF_OPERATION = 0x6060     # i8
 MODES_DISPLAY = 0x6061          # i8
@@ -178,6 +183,50 @@ ABORT_READ_ONLY = 0x06010002
 ABORT_RANGE = 0x06090030
 ABORT_STATE = 0x08000022
 ABORT_UNSUPPORTED = 0x05040001   # command specifier not valid
+
+
+class AbortConnection(enum.IntEnum):
+    """CiA 402 0x6007, the abort connection option code: what the drive does
+    when it detects a lost connection (heartbeat consumer or life guarding
+    expired, bus-off, NMT left OPERATIONAL). Negative values are the maker's."""
+
+    NO_ACTION = 0
+    FAULT = 1               # fault signal: the fault reaction (0x605E), then FAULT
+    DISABLE_VOLTAGE = 2     # power stage off: the motor coasts
+    QUICK_STOP = 3          # quick stop (0x605A, 0x6085), then as 0x605A says
+
+
+#: CiA 301 SDO abort codes, for messages that name the refusal
+SDO_ABORT_CODES = {
+    0x05030000: "toggle bit not alternated",
+    0x05040000: "SDO protocol timed out",
+    0x05040001: "command specifier not valid or unknown",
+    0x06010000: "unsupported access to an object",
+    0x06010001: "attempt to read a write-only object",
+    0x06010002: "attempt to write a read-only object",
+    0x06020000: "object does not exist in the object dictionary",
+    0x06040041: "object cannot be mapped to the PDO",
+    0x06040042: "the objects would exceed the PDO length",
+    0x06040043: "general parameter incompatibility",
+    0x06040047: "general internal incompatibility in the device",
+    0x06060000: "access failed due to a hardware error",
+    0x06070010: "data type does not match, length of service parameter does not match",
+    0x06090011: "sub-index does not exist",
+    0x06090030: "value range of parameter exceeded",
+    0x06090031: "value of parameter written too high",
+    0x06090032: "value of parameter written too low",
+    0x08000000: "general error",
+    0x08000020: "data cannot be transferred or stored to the application",
+    0x08000021: "data cannot be transferred or stored because of local control",
+    0x08000022: "data cannot be transferred or stored in the present device state",
+    0x060A0023: "resource not available: SDO connection",
+}
+
+
+def sdo_abort_text(code: int) -> str:
+    """``0x06020000 (object does not exist in the object dictionary)``."""
+    meaning = SDO_ABORT_CODES.get(code)
+    return f"0x{code:08X}" + (f" ({meaning})" if meaning else "")
 
 
 def sdo_download_request(index: int, subindex: int, data: bytes) -> bytes:

@@ -353,8 +353,11 @@ class EmulatedCia402Drive:
         elif self.nmt == co.NmtState.OPERATIONAL:
             if self._dirty:
                 self._refresh()
-            if cob in self._rpdos:
-                self._on_rpdo(*self._rpdos[cob], data)
+            # a PDO is received on its identifier in its frame format only
+            # (CiA 301 bit 29): an 11-bit RPDO ignores a 29-bit frame
+            key = (cob, bool(msg.is_extended_id))
+            if key in self._rpdos:
+                self._on_rpdo(*self._rpdos[key], data)
 
     def _master_cob(self) -> int | None:
         return None if self._consumer is None else self._consumer[0]
@@ -379,12 +382,12 @@ class EmulatedCia402Drive:
         for k in range(self.axes[0].objects.pdo_count(co.RPDO_COMM)):
             cob = self.get(co.RPDO_COMM + k, 1)
             if not cob & co.PDO_INVALID:
-                self._rpdos[cob & 0x1FFFFFFF] = (self.get(co.RPDO_COMM + k, 2),
+                self._rpdos[_identifier(cob)] = (self.get(co.RPDO_COMM + k, 2),
                                                  self._mapping(co.RPDO_MAP + k))
         for k in range(self.axes[0].objects.pdo_count(co.TPDO_COMM)):
             cob = self.get(co.TPDO_COMM + k, 1)
             if not cob & co.PDO_INVALID:
-                self._tpdos.append((cob & 0x1FFFFFFF, self.get(co.TPDO_COMM + k, 2),
+                self._tpdos.append((_identifier(cob)[0], self.get(co.TPDO_COMM + k, 2),
                                     self._mapping(co.TPDO_MAP + k)))
 
     def _on_nmt(self, command: int) -> None:
@@ -541,16 +544,41 @@ class EmulatedCia402Drive:
 
     def _watchdogs(self, now: float) -> None:
         """Heartbeat consumer (0x1016) and life guarding (0x100C x 0x100D):
-        the master went quiet -> every axis faults (0x8130, life guard error)."""
+        the master went quiet -> each axis does what its abort connection
+        option code 0x6007 says (CiA 402): 0 nothing, 1 fault (0x8130, life
+        guard error), 2 disable voltage (the motor coasts), 3 quick stop (the
+        motor brakes to rest, QUICK STOP ACTIVE); without 0x6007 this drive
+        faults (the maker's choice)."""
         expired = (self._consumer is not None and self._master_heartbeat is not None
                    and now - self._master_heartbeat > self._consumer[1])
         last_guard = self._guarding.last_request
         if self._life_time > 0 and last_guard is not None and now - last_guard > self._life_time:
             expired = True
         if expired:
+            # CiA 301: after the event, the monitoring waits for the next
+            # heartbeat (guarding request) before it can expire again
+            self._master_heartbeat = None
+            self._guarding.last_request = None
             for axis in self.axes:
-                if axis.state is not State.FAULT:
-                    self._fault(axis, 0x8130)
+                self._lost_connection(axis)
+
+    def _lost_connection(self, axis: _Axis) -> None:
+        option = (self._value(axis.objects, co.ABORT_CONNECTION_OPTION)
+                  if axis.objects.has(co.ABORT_CONNECTION_OPTION) else co.AbortConnection.FAULT)
+        if option == co.AbortConnection.NO_ACTION or axis.state is State.FAULT:
+            return
+        # (this emulator's motor ramps to rest in every state but OPERATION
+        # ENABLED: _command, at the next step)
+        if option == co.AbortConnection.DISABLE_VOLTAGE:
+            axis.state = State.SWITCH_ON_DISABLED
+        elif option == co.AbortConnection.QUICK_STOP:
+            if axis.state is State.OPERATION_ENABLED:
+                axis.state = State.QUICK_STOP_ACTIVE
+        else:
+            self._fault(axis, 0x8130)
+            return
+        self._dirty = True
+        self._put(axis.objects, co.STATUSWORD, co.statusword_of(axis.state))
 
     def _cyclic(self, now: float) -> None:
         if not self._booted:
@@ -567,6 +595,14 @@ def _variables(od: ObjectDictionary):
             yield obj
         else:
             yield from obj.values()
+
+
+def _identifier(cob: int) -> tuple[int, bool]:
+    """(CAN identifier, 29-bit) of a PDO COB-ID entry (CiA 301: bit 29 picks
+    the frame format; bits 30 and 31 are flags, not part of the identifier)."""
+    if cob & co.PDO_EXTENDED:
+        return cob & 0x1FFFFFFF, True
+    return cob & co.PDO_ID_11, False
 
 
 def _int32(value: int) -> int:

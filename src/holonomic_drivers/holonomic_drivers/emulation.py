@@ -294,7 +294,9 @@ class EmulatedOdriveAxis(EmulatedDevice):
         data = bytes(msg.data)
         if self.firmware == "0.5":
             self._last_input = now       # any frame to the axis feeds 0.5's watchdog
-        elif cmd == Cmd.GET_VERSION and (msg.is_remote_frame or not data):
+        elif cmd == Cmd.GET_VERSION and msg.is_remote_frame:
+            # the request is a remote frame (ODrive's CAN docs); an empty data
+            # frame on this id is not one (it would collide with the answer)
             self.send(proto.frame_id(self.node_id, Cmd.GET_VERSION), self.version.encode())
             return
         elif cmd == Cmd.RX_SDO and not msg.is_remote_frame:

@@ -406,7 +406,9 @@ class OdriveCanDriver(CanDriver):
         node, device, table = self.joints.node_ids[i], self.devices[i], self._endpoints
         axis = self._axes[i]
         axis.version = None
-        self._send(node, Cmd.GET_VERSION, b"")
+        # a remote frame, as ODrive's CAN documentation and its Arduino library
+        # ask: an empty *data* frame on the id of the answer collides with it
+        self._send(node, Cmd.GET_VERSION, b"", remote=True)
         self._await(lambda: axis.version is not None, device, "Get_Version")
         why = table.mismatch(axis.version)
         if why:
@@ -568,7 +570,8 @@ class OdriveCanDriver(CanDriver):
                 reply = proto.SdoReply.decode(bytes(msg.data))
                 count = axis.sdo.get(reply.endpoint_id, (b"", 0))[1]
                 axis.sdo[reply.endpoint_id] = (reply.value, count + 1)
-            elif cmd == Cmd.GET_VERSION and self.firmware == "0.6" and len(msg.data):
+            elif (cmd == Cmd.GET_VERSION and self.firmware == "0.6"
+                  and not msg.is_remote_frame and len(msg.data)):
                 axis.version = proto.Version.decode(bytes(msg.data))
             elif cmd == Cmd.GET_ENCODER_ESTIMATES:
                 est = proto.EncoderEstimates.decode(bytes(msg.data))

@@ -95,6 +95,8 @@ def test_cmd_reaches_the_wire_and_odometry_follows_the_encoders(rig_factory, bac
     twist = np.array([0.3, -0.2, 0.4])
     rig.run(1.5, twist)
     assert rig.controller.state is ControllerState.ARMED, rig.controller.fault
+    # not one reading the glitch policy dropped (a false glitch would be one)
+    assert rig.controller.status().dropped_readings == 0, rig.controller.status().last_dropped
     # the wire carries the inverse kinematics of the command
     assert _steady_wire_twist(rig) == pytest.approx(twist, abs=2e-3)
     # odometry moves with the command (measured twist over the last 0.5 s)

@@ -355,6 +355,7 @@ def test_cia402_driver_sends_the_scripted_frames():
             "40 00 10 00 00 00 00 00",      # read 0x1000 device type
             "2b 17 10 00 32 00 00 00",      # 0x1017 producer heartbeat 50 ms
             "23 16 10 01 fa 00 7f 00",      # 0x1016.1 consumer: master 127, 250 ms
+            "2b 07 60 00 01 00 00 00",      # 0x6007 abort connection option: 1 fault
             "2f 60 60 00 09 00 00 00",      # 0x6060 mode 9: cyclic synchronous velocity
             "23 ff 60 00 00 00 00 00",      # 0x60FF target velocity 0
             # RPDO1 (0x1400 / 0x1600): controlword 0x6040 16 bits, target velocity 0x60FF 32

@@ -50,11 +50,11 @@ RPM = {f"cia402.joints.{j}.velocity_resolution": 60.0 for j in JOINTS}
 def rig_factory():
     rigs = []
 
-    def make(eds: str, **overrides) -> CanRig:
+    def make(eds: str, drive_eds: str | None = None, **overrides) -> CanRig:
         params = dict(RELAXED)
         params["cia402.eds"] = str(DATA / eds)
         params.update(overrides)
-        rig = CanRig("cia402", "hamr", **params)
+        rig = CanRig("cia402", "hamr", drive_eds=drive_eds, **params)
         rigs.append(rig)
         return rig
 
@@ -341,8 +341,12 @@ def test_two_axis_device_drives_two_joints_through_its_offset_objects(rig_factor
      "cia402.joints.right_wheel_joint.node_id", "not already used by left_wheel_joint"),
     ({"cia402.eds": str(DATA / "velocity_only.eds"), "control_mode": "torque"},
      "control_mode", "no cyclic synchronous torque"),
+    ({"cia402.drive_watchdog_reaction": "coast"}, "cia402.drive_watchdog_reaction",
+     "expected one of ['fault', 'quick_stop']"),
+    ({"cia402.drive_watchdog_reaction": 1}, "cia402.drive_watchdog_reaction", "expected one of"),
 ], ids=["missing file", "not an EDS", "unknown axis", "axis without EDS", "axis used twice",
-        "torque on a velocity-only drive"])
+        "torque on a velocity-only drive", "unknown watchdog reaction",
+        "watchdog reaction as a number"])
 def test_bad_drive_files_are_refused_naming_the_key(overrides, key, words):
     params = {"driver": "cia402"}
     params.update(overrides)

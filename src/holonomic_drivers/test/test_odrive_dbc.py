@@ -379,7 +379,7 @@ class DbcEndpointAxes(DbcAxes):
         self.fed[node] = time.monotonic()
         if self.firmware != "0.6":
             return
-        if cmd == proto.Cmd.GET_VERSION and not msg.data:
+        if cmd == proto.Cmd.GET_VERSION and msg.is_remote_frame:
             self.bus.send(self._encode(f"Axis{node}_Get_Version", {
                 "Protocol_Version": 2, "Hw_Version_Major": 4, "Hw_Version_Minor": 4,
                 "Hw_Version_Variant": 58, "Fw_Version_Major": 0, "Fw_Version_Minor": 6,

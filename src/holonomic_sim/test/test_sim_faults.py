@@ -41,8 +41,10 @@ class FaultySimDriver(SimDriver):
 
 
 class Rig:
-    def __init__(self, robot="hamr"):
-        self.cfg = load_config(robot, {"cmd_timeout": 0.0})
+    def __init__(self, robot="hamr", **overrides):
+        # glitch_policy fault: one spike faults (test_sim_glitches.py: drop)
+        self.cfg = load_config(robot, dict({"cmd_timeout": 0.0, "safety.glitch_policy": "fault"},
+                                           **overrides))
         self.now = 0.0
         self.driver = FaultySimDriver(self.cfg.model, self.cfg.values,
                                       self.cfg.controller.control_rate)

@@ -46,11 +46,14 @@ def unique_channel(tag: str) -> str:
 
 
 class CanRig:
-    def __init__(self, backend: str, robot: str = "hamr", realtime: bool = True, **overrides):
+    def __init__(self, backend: str, robot: str = "hamr", realtime: bool = True,
+                 drive_eds: str | None = None, **overrides):
         """``realtime``: ask for SCHED_FIFO for the drives' process and the
         loop's thread (as the product's loop process does, default on); when
         the system refuses, ``realtime_refused`` says why (one line, also on
-        stderr) and the rig runs without."""
+        stderr) and the rig runs without. ``drive_eds``: the file the
+        emulated CiA 402 drives are built from when it is not the driver's
+        (a drive that differs from its file)."""
         # The controller shares this (large, long-lived) test process with
         # canopen's notifier thread: a full garbage collection here can pause
         # both for tens of ms. The loop process freezes its own start-up
@@ -87,7 +90,7 @@ class CanRig:
             specs = []
             for n in dict.fromkeys(self.node_ids):
                 j = self.model.joint_names[self.node_ids.index(n)]
-                eds = v[f"cia402.joints.{j}.eds"] or v["cia402.eds"] or None
+                eds = drive_eds or v[f"cia402.joints.{j}.eds"] or v["cia402.eds"] or None
                 specs.append(("cia402", n, {
                     "eds": eds,
                     "encoder_resolution": int(v[f"cia402.joints.{j}.encoder_resolution"])}))

@@ -34,6 +34,18 @@ FILES = {
     "two_axis.eds": dict(axes=2, torque=False),
     # no drive-side watchdog at all: no 0x1016, no 0x100C/0x100D
     "no_watchdog.eds": dict(watchdog="none", torque=False),
+    # bit 30 (no RTR) on the RPDO COB-IDs as well as the TPDOs: $NODEID+0x40000200
+    "rpdo_no_rtr.eds": dict(rpdo_rtr_bit=True, rtr_not_allowed=True, torque=False),
+    # abort connection option code 0x6007 = 0 (no action) by default, writable
+    "abort_connection_zero.eds": dict(abort_connection=("rw", 0), torque=False),
+    # 0x6007 = 0 and read-only: the drive keeps running when it loses the master
+    "abort_connection_ro.eds": dict(abort_connection=("ro", 0), torque=False),
+    # no 0x6007 at all
+    "abort_connection_missing.eds": dict(abort_connection=None, torque=False),
+    # velocity_only.eds plus a velocity unit 0x60A9 (rpm): the file of a drive that,
+    # emulated from velocity_only.eds, does not have the 0x60A9 its file lists
+    "rpm_unit.eds": dict(velocity_unit=RPM, torque=False, error_code="none",
+                         supported_modes=mode_bit(3) | mode_bit(9)),
 }
 
 
