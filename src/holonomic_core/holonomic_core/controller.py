@@ -323,7 +323,8 @@ class BaseController:
         self.twist_command = twist * scale if scale < 1.0 else twist
         self._twist_memory = (self.twist_command, self.twist_command.copy(), before.copy())
         self.joint_command = rates
-        self.saturation = scale
+        self.saturation = scale if self.joint_acceleration is None \
+            else scale * self.joint_acceleration.speed_scale
         return True
 
     def _twist_acceleration(self) -> np.ndarray | None:

@@ -80,11 +80,14 @@ class JointAccelerationLimit:
 
     ``inverse(positions, twist)``: the exact inverse kinematics (joint rates
     [rad/s] in joint order, linear in the twist); ``max_acceleration``
-    [rad/s^2] per joint, ``inf`` for a joint without a limit.
+    [rad/s^2] per joint, ``inf`` for a joint without a limit;
+    ``max_velocity`` [rad/s] per joint (> 0).
     """
 
-    def __init__(self, inverse, max_acceleration):
+    def __init__(self, inverse, max_acceleration, max_velocity):
         self._inverse = inverse
+        #: the joints' speed limits [rad/s], joint order
+        self.max_velocity = tuple(float(v) for v in max_velocity)
         limits = np.array(max_acceleration, dtype=float)
         if limits.ndim != 1 or np.any(np.isnan(limits)) or np.any(limits <= 0):
             raise ValueError(f"JointAccelerationLimit max_acceleration must be numbers > 0 "
@@ -94,8 +97,8 @@ class JointAccelerationLimit:
         self._limited = [i for i, v in enumerate(limits.tolist()) if math.isfinite(v)]
         #: the last cycle's outcome: "target", "slowed", "saturated" (diagnostics, tests)
         self.last = "target"
-        #: the scale of the last cycle's twist change (1: unchanged)
-        self.last_scale = 1.0
+        #: the uniform scale of the last cycle's target to the joint speed limits
+        self.speed_scale = 1.0
 
     @classmethod
     def from_config(cls, model, values: Mapping) -> "JointAccelerationLimit | None":
@@ -105,7 +108,7 @@ class JointAccelerationLimit:
                   for j in model.joint_names]
         if all(math.isinf(v) for v in limits):
             return None
-        return cls(model.kinematics.inverse, limits)
+        return cls(model.kinematics.inverse, limits, model.max_joint_velocity)
 
     def accelerations(self, positions, twist, previous_rates, dt: float) -> np.ndarray:
         """The joint accelerations [rad/s^2] over a cycle of ``dt`` [s] in which
@@ -119,35 +122,55 @@ class JointAccelerationLimit:
         ``positions`` [rad]: the measured joints; ``twist``: the limited target
         of this cycle; ``previous_twist`` and ``previous_rates`` [rad/s]: what
         the last cycle commanded (after the joint speed saturation). Returns
-        ``twist`` itself when every joint is within its limit.
+        ``twist`` itself when every joint is within its limits.
+
+        The joint speed limits are part of the same intervals (``|q_dot_i| <=
+        max_velocity_i`` is affine along each candidate too), and the target is
+        first scaled uniformly to them, as the saturation after this stage
+        would: so the twist chosen keeps every joint within its speed *and*
+        acceleration limits whenever that is possible, and the saturation that
+        follows has nothing left to do. :attr:`speed_scale` is that first
+        scaling (the controller reports it as its saturation).
         """
         if not dt > 0.0:
+            self.last, self.speed_scale = "target", 1.0
             return previous_twist.copy()
         base = self._inverse(positions, previous_twist)
         rates = self._inverse(positions, twist)
-        idx = self._limited
+        base_l, rates_l = base.tolist(), rates.tolist()
+        prev_l = np.asarray(previous_rates, dtype=float).tolist()
+        vmax = self.max_velocity
+        worst = max(abs(r) / v for r, v in zip(rates_l, vmax))
+        self.speed_scale = 1.0 if worst <= 1.0 else 1.0 / worst
+        if self.speed_scale < 1.0:
+            twist = twist * self.speed_scale
+            rates_l = [r * self.speed_scale for r in rates_l]
         lim = self.max_acceleration.tolist()
-        base_l, rates_l, prev_l = base.tolist(), rates.tolist(), np.asarray(previous_rates).tolist()
-        drift = [base_l[i] - prev_l[i] for i in idx]
-        change = [rates_l[i] - base_l[i] for i in idx]
-        cap = [lim[i] * dt for i in idx]
-        # 1. along the line to the target
+        idx = self._limited
+        # acceleration constraints |drift + s direction| <= cap, then the
+        # speed constraints |base + s direction| <= max_velocity
+        drift = [base_l[i] - prev_l[i] for i in idx] + base_l
+        change = [rates_l[i] - base_l[i] for i in idx] + [r - b for r, b in zip(rates_l, base_l)]
+        cap = [lim[i] * dt for i in idx] + list(vmax)
+        # 1. along the line to the (speed-scaled) target
         lo, hi = _feasible(drift, change, cap)
         if lo <= hi:
+            self.last = "target"
             if hi >= 1.0:
-                self.last, self.last_scale = "target", 1.0
                 return twist
-            self.last, self.last_scale = "target", hi
             return previous_twist + (twist - previous_twist) * hi
-        # 2. slowing down along the current motion: a - u base
-        slow = [-base_l[i] for i in idx]
+        # 2. slowing down along the current motion: drift - u base
+        slow = [-base_l[i] for i in idx] + [-b for b in base_l]
         lo, hi = _feasible(drift, slow, cap)
         if lo <= hi:
-            self.last, self.last_scale = "slowed", 0.0
+            self.last = "slowed"
             return previous_twist * (1.0 - lo)
-        # 3. least violation: the smallest ratio at which either segment is feasible
+        # 3. least violation: the smallest ratio at which either segment is
+        # feasible (the speed limits scaled with it: the saturation after
+        # this stage then cuts the speeds back)
         low, high = 1.0, min(self._worst(drift, change, cap, 0.0),
                              self._worst(drift, slow, cap, 1.0))
+
         def either(scale: float) -> bool:
             for direction in (change, slow):
                 lo, hi = _feasible(drift, direction, cap, scale)
@@ -161,7 +184,7 @@ class JointAccelerationLimit:
                 high = mid
             else:
                 low = mid
-        self.last, self.last_scale = "saturated", 0.0
+        self.last = "saturated"
         lo, hi = _feasible(drift, change, cap, high)
         if lo <= hi:
             return previous_twist + (twist - previous_twist) * hi
