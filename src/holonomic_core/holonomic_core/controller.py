@@ -8,7 +8,8 @@ Each :meth:`BaseController.step` (called by the fixed-rate loop thread):
 3. picks the target twist: the latest command, or zero when disarmed, when
    the command is stale (older than ``cmd_timeout``) or when it was
    rejected as non-finite;
-4. limits it (speed, acceleration, deceleration: direction-preserving),
+4. limits it (speeds and the speed norm, acceleration, deceleration, jerk,
+   then the joints' accelerations: direction-preserving; docs/limits.md),
    maps it through the exact inverse kinematics at the measured joint
    positions, scales the joint rates uniformly to their speed limits, and
    writes them.
