@@ -3,11 +3,12 @@
 Two stages, both *uniform scalings*, never per-axis clipping (which bends the
 path: a diagonal command clipped on x only turns into a more lateral one):
 
-* :class:`TwistLimiter` -- per-axis speed, acceleration and deceleration
-  limits on the body twist, as ros2_controllers' ``SpeedLimiter`` has them,
+* :class:`TwistLimiter` -- per-axis speed, acceleration, deceleration and
+  jerk limits and a limit on the translation speed (the norm of (vx, vy)) on
+  the body twist, as ros2_controllers' ``SpeedLimiter`` has the per-axis ones,
   except that when any axis would exceed its limit the whole twist (or the
-  whole change of twist) is scaled down, so a diagonal move ramps along the
-  diagonal;
+  whole change of twist, or of its acceleration) is scaled down, so a
+  diagonal move ramps along the diagonal (docs/limits.md);
 * :func:`saturate_joint_rates` -- when the inverse kinematics ask a joint for
   more than its speed limit, all joint rates are scaled by the same factor.
   The inverse kinematics are linear in the twist, so this is the same as
