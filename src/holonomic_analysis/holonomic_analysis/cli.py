@@ -108,7 +108,7 @@ def run(args: argparse.Namespace, out=None) -> dict:
     overrides = dict(args.param)
     # The whole configuration, so that a misspelt -p or --sweep key is named
     # (load_model alone reads only the geometry and would ignore it).
-    load_config(args.robot, overrides)
+    max_speed = load_config(args.robot, overrides).controller.max_speed
     for text in args.sweep:
         key, values = mobility.parse_sweep(text)
         load_config(args.robot, {**overrides, key: float(values[0])})
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace, out=None) -> dict:
         return mobility.configuration(m, args.steer, args.turret)
 
     positions = positions_of(model)
-    result = mobility.analyze(model, positions)
+    result = mobility.analyze(model, positions, max_speed)
     report = [f"{model.name} ({model.kind}) at "
               + ", ".join(f"{k} {v:+.3f}" for k, v in result["configuration"].items()
                           if not k.endswith("wheel_joint")),
@@ -126,7 +126,9 @@ def run(args: argparse.Namespace, out=None) -> dict:
               f"{result['constant_heading_speed']['slowest']:.3f} .. "
               f"{result['constant_heading_speed']['fastest']:.3f} m/s)",
               f"  sigma_ratio {result['sigma_ratio']:.4f} (J_joint_to_base, SI units)",
-              f"  max speed: {_fmt_speeds(result['max_speed'])}",
+              f"  max speed: {_fmt_speeds(result['max_speed'])}"
+              + ("" if result["speed_limit"] is None
+                 else f" (limits.linear.max_speed {result['speed_limit']:g} m/s caps them)"),
               f"  orientation bias {result['orientation_bias']:+.3f} rad/m "
               "(skew of the lateral-rotation projection)"]
     figures = []
@@ -147,7 +149,7 @@ def run(args: argparse.Namespace, out=None) -> dict:
         for text in args.sweep:
             key, values = mobility.parse_sweep(text)
             rows = mobility.sweep(lambda o: load_model(args.robot, o), key, values,
-                                  overrides, positions_of)
+                                  overrides, positions_of, max_speed)
             result["sweeps"][key] = [
                 {"value": r["value"], "H_hat": r["H_hat"], "sigma_ratio": r["sigma_ratio"],
                  "max_speed": r["max_speed"], "orientation_bias": r["orientation_bias"]}
@@ -212,7 +214,7 @@ def run(args: argparse.Namespace, out=None) -> dict:
                 times, index, starts, f"{model.name}: isotropy along the demo's teleop script",
                 plot_dir / f"{model.name}_isotropy_trajectory.png"))
     if args.measure:
-        extra = holonomicity.kinematic_overrides() if args.kinematic else {}
+        extra = holonomicity.kinematic_overrides(args.robot) if args.kinematic else {}
         m = holonomicity.measure(args.robot, args.distance, args.directions,
                                  args.heading_changes, args.driver, {**overrides, **extra})
         result["measured"] = m.as_dict()

@@ -190,15 +190,22 @@ def measure(robot, distance: float = 1.0, directions: int = 8,
     return result
 
 
-def kinematic_overrides() -> dict:
+def kinematic_overrides(robot=None) -> dict:
     """Overrides for the kinematic limit (``mock`` driver): twist limits far
-    above what the joints allow, accelerations at the schema's maximum and a
-    1 kHz loop, so that only the joint speed limits shape the motion."""
-    out: dict = {"control_rate": 1000.0, "publish_rate": 50.0}
+    above what the joints allow, accelerations at the schema's maximum, no
+    speed norm, jerk or (for ``robot``, a config name or path) joint
+    acceleration limit, and a 1 kHz loop, so that only the joint speed limits
+    shape the motion."""
+    out: dict = {"control_rate": 1000.0, "publish_rate": 50.0,
+                 "limits.linear.max_speed": 0.0}
     for axis in ("linear.x", "linear.y", "angular.z"):
         out[f"limits.{axis}.max_velocity"] = 100.0
         out[f"limits.{axis}.max_acceleration"] = 1000.0
         out[f"limits.{axis}.max_deceleration"] = 1000.0
+        out[f"limits.{axis}.max_jerk"] = 0.0
+    if robot is not None:
+        for joint in load_config(robot, {"driver": "mock"}).model.joint_names:
+            out[f"joints.{joint}.max_acceleration"] = 0.0
     return out
 
 

@@ -240,10 +240,35 @@ def sigma_ratio(model, positions) -> float:
     return float(s[-1] / s[0])
 
 
-def analyze(model, positions) -> dict:
-    """The numbers of ``holonomic-analyze --json`` for one configuration."""
+#: the max_speed entries that are translation speeds (capped by a speed norm)
+TRANSLATIONS = ("forward", "forward_constant_heading", "lateral", "lateral_constant_heading")
+
+
+def capped(speeds: Mapping[str, float], h_hat: float, slowest: float, fastest: float,
+           max_speed: float) -> tuple[dict, float, float, float]:
+    """The speeds and H_hat once the commanded translation speed, the norm of
+    (vx, vy), is limited to ``max_speed`` [m/s] (``limits.linear.max_speed``;
+    inf: none). The norm limit is a circle in the (vx, vy) plane: every
+    direction's speed becomes min(its joint-limited speed, max_speed), so the
+    slowest and the fastest constant-heading speeds are capped alike and H_hat
+    = min(slowest, cap) / min(fastest, cap) rises towards 1 as the cap comes
+    down to the slowest direction (a base limited below every direction's
+    joint limit is equally fast in every direction). Rotation is not capped."""
+    if not max_speed < fastest:
+        return dict(speeds), h_hat, slowest, fastest
+    out = {k: (min(v, max_speed) if k in TRANSLATIONS else v) for k, v in speeds.items()}
+    slow, fast = min(slowest, max_speed), max_speed
+    return out, (slow / fast if h_hat > 0.0 else 0.0), slow, fast
+
+
+def analyze(model, positions, max_speed: float = math.inf) -> dict:
+    """The numbers of ``holonomic-analyze --json`` for one configuration;
+    ``max_speed`` [m/s]: the config's limit on the norm of (vx, vy), which
+    caps the translation speeds and H_hat (:func:`capped`)."""
     speeds = SpeedSet.of(model, positions)
     h_hat, slowest, fastest = speeds.holonomicity()
+    max_speeds, h_hat, slowest, fastest = capped(speeds.max_speeds(), h_hat, slowest,
+                                                 fastest, max_speed)
     S = speeds.ellipsoid_shape
     return {
         "robot": model.name,
@@ -251,8 +276,9 @@ def analyze(model, positions) -> dict:
         "configuration": dict(zip(model.joint_names, map(float, positions))),
         "H_hat": h_hat,
         "sigma_ratio": sigma_ratio(model, positions),
-        "max_speed": speeds.max_speeds(),
+        "max_speed": max_speeds,
         "constant_heading_speed": {"slowest": slowest, "fastest": fastest},
+        "speed_limit": None if math.isinf(max_speed) else float(max_speed),
         "orientation_bias": speeds.orientation_bias(),
         "ellipsoid_semi_axes": [float(v) for v in np.sqrt(np.linalg.eigvalsh(S))[::-1]],
     }
@@ -274,7 +300,7 @@ def parse_sweep(text: str) -> tuple[str, np.ndarray]:
 
 
 def sweep(load, key: str, values: Sequence[float], overrides: Mapping[str, object],
-          positions_of) -> list[dict]:
+          positions_of, max_speed: float = math.inf) -> list[dict]:
     """``analyze`` for each value of the flat config ``key``.
 
     ``load(overrides)`` builds a model; ``positions_of(model)`` its
@@ -283,7 +309,7 @@ def sweep(load, key: str, values: Sequence[float], overrides: Mapping[str, objec
     rows = []
     for value in values:
         model = load({**overrides, key: float(value)})
-        row = analyze(model, positions_of(model))
+        row = analyze(model, positions_of(model), max_speed)
         row["value"] = float(value)
         rows.append(row)
     return rows

@@ -285,7 +285,7 @@ def _script():
 # -- measured holonomicity ------------------------------------------------------------------
 def test_measured_h_tends_to_h_hat_as_the_distance_shrinks():
     h_hat = analysis(hamr())["H_hat"]
-    kin = holonomicity.kinematic_overrides()
+    kin = holonomicity.kinematic_overrides("hamr")
     measured = [holonomicity.measure("hamr", d, 8, (0.0,), "mock", kin).H
                 for d in (1.0, 0.2, 0.03)]
     # the drive base swings toward the direction of travel during long moves,
@@ -337,13 +337,36 @@ def test_json_has_the_contract_keys(capsys):
     assert 0 < out["isotropy_index"] < 1 and out["L"] > 0
 
 
+def test_a_speed_norm_caps_the_translation_speeds_and_h_hat(capsys):
+    # HAMR: forward 1.23 m/s, constant-heading lateral 0.7732 m/s (joint limits)
+    assert analyze_main(["hamr", "--json", "-p", "limits.linear.max_speed:=1.0"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    s = out["max_speed"]
+    assert s["forward"] == pytest.approx(1.0) and s["lateral"] == pytest.approx(1.0)
+    assert s["lateral_constant_heading"] == pytest.approx(TURRET * B)     # below the cap
+    assert s["rotation"] == pytest.approx(TURRET)                          # not capped
+    assert out["H_hat"] == pytest.approx(TURRET * B / 1.0)
+    # a cap below every direction's speed: equally fast in every direction
+    assert analyze_main(["hamr", "--json", "-p", "limits.linear.max_speed:=0.5"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["H_hat"] == pytest.approx(1.0) and out["speed_limit"] == 0.5
+    # 0: no norm limit, the joint limits alone
+    assert analyze_main(["hamr", "--json", "-p", "limits.linear.max_speed:=0"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["H_hat"] == pytest.approx(TURRET * B / (WHEEL * R))
+    assert out["speed_limit"] is None
+
+
 def test_plot_writes_the_figures_and_sweep_prints_a_row_per_value(tmp_path, capsys):
     assert analyze_main(["hamr", "--plot", str(tmp_path),
                          "--sweep", "ddrot.turret_offset=0.05:0.4:8"]) == 0
     out = capsys.readouterr().out
     # H_hat of HAMR = constant-heading lateral / forward speed = turret rate * b
     # / (wheel rate * r) = 4.712 * 0.1641 / (20 * 0.0615) = 0.7732 / 1.23 = 0.629
-    assert f"H_hat {TURRET * B / (WHEEL * R):.3f}" in out
+    # within the joint limits; config/hamr.yaml caps the speed norm at 1.2 m/s:
+    # 0.7732 / 1.2 = 0.644
+    assert f"H_hat {TURRET * B / 1.2:.3f}" in out
+    assert "limits.linear.max_speed 1.2 m/s caps them" in out
     assert sum(1 for line in out.splitlines() if line.strip().startswith(("0.", "0,"))) >= 8
     for name in ("hamr_ellipsoid_3d.png", "hamr_projections.png",
                  "hamr_sweep_ddrot.turret_offset.png"):

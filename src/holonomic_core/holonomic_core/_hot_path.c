@@ -99,18 +99,36 @@ check_nargs(Py_ssize_t nargs, Py_ssize_t want, const char *name)
     return 0;
 }
 
-/* limit_twist(target, previous, dt, limits) -> new twist array (3,)
-   limits: (vmax[3], amax[3], dmax[3]). Mirrors TwistLimiter.limit:
-   limit_velocity, then limit_acceleration. */
+/* jerk_arrival_bound(gap, jerk): mirrors holonomic_core.limits.jerk_arrival_bound */
+static double
+jerk_arrival_bound(double gap, double jerk)
+{
+    if (gap <= 0.0)
+        return 0.0;
+    if (!(gap / jerk <= 1e12))
+        return sqrt(2.0 * gap * jerk);
+    double n = floor((sqrt(1.0 + 8.0 * gap / jerk) - 1.0) / 2.0);
+    while (n > 0 && jerk * n * (n + 1) / 2.0 > gap)
+        n -= 1;
+    while (jerk * (n + 1) * (n + 2) / 2.0 <= gap)
+        n += 1;
+    return (gap + jerk * n * (n + 1) / 2.0) / (n + 1);
+}
+
+/* limit_twist(target, previous, dt, limits, acceleration) -> new twist array (3,)
+   limits: (vmax[3], amax[3], dmax[3], max_speed, jmax[3]). Mirrors
+   TwistLimiter.limit: limit_velocity, then limit_acceleration (no axis with a
+   jerk limit) or limit_jerk. */
 static PyObject *
 limit_twist(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (check_nargs(nargs, 4, "limit_twist") < 0)
+    if (check_nargs(nargs, 5, "limit_twist") < 0)
         return NULL;
     double dt;
     if (arg_double(args[2], &dt) < 0)
         return NULL;
-    PyArrayObject *tgt_a = as_vector(args[0], "target"), *prev_a = NULL, *lim_a = NULL;
+    PyArrayObject *tgt_a = as_vector(args[0], "target"), *prev_a = NULL, *lim_a = NULL,
+                  *acc_a = NULL;
     PyObject *out = NULL;
     if (tgt_a == NULL || need_length(tgt_a, 3, "target") < 0)
         goto done;
@@ -118,10 +136,15 @@ limit_twist(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (prev_a == NULL || need_length(prev_a, 3, "previous") < 0)
         goto done;
     lim_a = as_vector(args[3], "limits");
-    if (lim_a == NULL || need_length(lim_a, 9, "limits") < 0)
+    if (lim_a == NULL || need_length(lim_a, 13, "limits") < 0)
+        goto done;
+    acc_a = as_vector(args[4], "acceleration");
+    if (acc_a == NULL || need_length(acc_a, 3, "acceleration") < 0)
         goto done;
     const double *target = PyArray_DATA(tgt_a), *prev = PyArray_DATA(prev_a);
+    const double *acc_in = PyArray_DATA(acc_a);
     const double *vmax = PyArray_DATA(lim_a), *amax = vmax + 3, *dmax = vmax + 6;
+    const double max_speed = vmax[9], *jmax = vmax + 10;
     double tgt[3];
     /* limit_velocity: one scale for the three axes */
     double scale = 1.0;
@@ -133,32 +156,88 @@ limit_twist(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 scale = s;
         }
     }
+    {
+        double vx = target[0] * scale, vy = target[1] * scale;
+        double speed = sqrt(vx * vx + vy * vy);
+        if (speed > max_speed)
+            scale = scale * (max_speed / speed);
+    }
     for (int i = 0; i < 3; i++)
         tgt[i] = scale < 1.0 ? target[i] * scale : target[i];
-    /* limit_acceleration */
-    scale = 1.0;
-    for (int i = 0; i < 3; i++) {
-        double change = fabs(tgt[i] - prev[i]);
-        if (change == 0.0)
-            continue;
-        int growing = fabs(tgt[i]) > fabs(prev[i]) && tgt[i] * prev[i] >= 0.0;
-        double step = (growing ? amax[i] : dmax[i]) * dt;
-        if (change > step) {
-            double s = step / change;
-            if (s < scale)
-                scale = s;
-        }
-    }
+    int jerk_limited = isfinite(jmax[0]) || isfinite(jmax[1]) || isfinite(jmax[2]);
     double *o;
     out = new_vector(3, &o);
     if (out == NULL)
         goto done;
+    if (!jerk_limited) {
+        /* limit_acceleration */
+        scale = 1.0;
+        for (int i = 0; i < 3; i++) {
+            double change = fabs(tgt[i] - prev[i]);
+            if (change == 0.0)
+                continue;
+            int growing = fabs(tgt[i]) > fabs(prev[i]) && tgt[i] * prev[i] >= 0.0;
+            double step = (growing ? amax[i] : dmax[i]) * dt;
+            if (change > step) {
+                double s = step / change;
+                if (s < scale)
+                    scale = s;
+            }
+        }
+        for (int i = 0; i < 3; i++)
+            o[i] = scale == 1.0 ? tgt[i] : prev[i] + (tgt[i] - prev[i]) * scale;
+        goto done;
+    }
+    /* limit_jerk */
+    if (!(dt > 0.0)) {
+        for (int i = 0; i < 3; i++)
+            o[i] = prev[i];
+        goto done;
+    }
+    double sigma = 1.0, kappa = 1.0, wanted[3], acc[3];
+    for (int i = 0; i < 3; i++) {
+        double bound = amax[i] > dmax[i] ? amax[i] : dmax[i];   /* np.maximum */
+        double a = -bound > acc_in[i] ? -bound : acc_in[i];     /* max(a, -lim) */
+        acc[i] = bound < a ? bound : a;                         /* min(., lim) */
+    }
+    for (int i = 0; i < 3; i++) {
+        double change = fabs(tgt[i] - prev[i]);
+        if (change == 0.0)
+            continue;
+        double need = change / dt;
+        int growing = fabs(tgt[i]) > fabs(prev[i]) && tgt[i] * prev[i] >= 0.0;
+        double allowed = growing ? amax[i] : dmax[i];
+        double jerk = jmax[i] * dt;
+        if (jerk < INFINITY) {
+            double bound = jerk_arrival_bound(need, jerk);
+            if (bound < allowed)    /* min(allowed, bound) */
+                allowed = bound;
+        }
+        if (need > allowed) {
+            double s = allowed / need;
+            if (s < sigma)
+                sigma = s;
+        }
+    }
     for (int i = 0; i < 3; i++)
-        o[i] = scale == 1.0 ? tgt[i] : prev[i] + (tgt[i] - prev[i]) * scale;
+        wanted[i] = (tgt[i] - prev[i]) / dt * sigma;
+    for (int i = 0; i < 3; i++) {
+        double change = fabs(wanted[i] - acc[i]);
+        double jerk = jmax[i] * dt;
+        if (change > jerk) {
+            double s = jerk / change;
+            if (s < kappa)
+                kappa = s;
+        }
+    }
+    for (int i = 0; i < 3; i++)
+        o[i] = (sigma == 1.0 && kappa == 1.0) ? tgt[i]
+               : prev[i] + (acc[i] + (wanted[i] - acc[i]) * kappa) * dt;
 done:
     Py_XDECREF(tgt_a);
     Py_XDECREF(prev_a);
     Py_XDECREF(lim_a);
+    Py_XDECREF(acc_a);
     return out;
 }
 
@@ -943,7 +1022,7 @@ done:
 
 static PyMethodDef methods[] = {
     {"limit_twist", (PyCFunction)(void (*)(void))limit_twist, METH_FASTCALL,
-     "limit_twist(target, previous, dt, limits) -> twist: TwistLimiter.limit."},
+     "limit_twist(target, previous, dt, limits, acceleration) -> twist: TwistLimiter.limit."},
     {"saturate_joint_rates", (PyCFunction)(void (*)(void))saturate_joint_rates, METH_FASTCALL,
      "saturate_joint_rates(rates, max_rates) -> (rates, scale)."},
     {"inverse", (PyCFunction)(void (*)(void))inverse, METH_FASTCALL,

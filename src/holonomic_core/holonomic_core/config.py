@@ -22,6 +22,7 @@ mean"), so that a typo is never silently ignored.
 from __future__ import annotations
 
 import difflib
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,6 +77,10 @@ def joint_specs(joint: str) -> list[ParamSpec]:
                   "zero (a steering joint: the wheel rolls along base_link x; the turret: the "
                   "drive base faces base_link x); holonomic-calibrate estimates it.",
                   default=0.0, minimum=-3.2, maximum=3.2),
+        ParamSpec(f"joints.{joint}.max_acceleration", "double",
+                  f"Acceleration limit of {joint} [rad/s^2]: the commanded twist's change "
+                  "is scaled so that no joint's rate changes faster (joint_acceleration.py); "
+                  "0: no limit.", default=0.0, minimum=0.0, maximum=1e6),
     ]
 
 
@@ -98,8 +103,18 @@ def _limit_specs() -> list[ParamSpec]:
                       f"Deceleration limit on {axis} when slowing down or stopping "
                       f"(also after a command timeout) [{acc_unit}].",
                       minimum=0.0, exclusive_minimum=True, maximum=1000.0),
+            ParamSpec(f"limits.{axis}.max_jerk", "double",
+                      f"Jerk limit on {axis}: how fast its acceleration may change "
+                      f"[{acc_unit[:-1]}3]; it also lengthens every stop, a timeout's too "
+                      "(docs/limits.md); 0: no limit.",
+                      default=0.0, minimum=0.0, maximum=1e5),
         ]
-    return specs
+    return specs + [
+        ParamSpec("limits.linear.max_speed", "double",
+                  "Limit on the commanded translation speed, the norm of (vx, vy) [m/s]: a "
+                  "diagonal is no faster than a straight line (the per-axis max_velocity "
+                  "still apply); 0: no limit.", default=0.0, minimum=0.0, maximum=100.0),
+    ]
 
 
 CONTROLLER_SPECS: list[ParamSpec] = [
@@ -260,6 +275,10 @@ class ControllerConfig:
     max_velocity: tuple[float, float, float]
     max_acceleration: tuple[float, float, float]
     max_deceleration: tuple[float, float, float]
+    #: [m/s], inf: none (limits.linear.max_speed = 0)
+    max_speed: float
+    #: [m/s^3, m/s^3, rad/s^3], inf: none on that axis (limits.*.max_jerk = 0)
+    max_jerk: tuple[float, float, float]
     noise: OdometryNoise
     twist_window: float
     monitor: MonitorLimits
@@ -290,6 +309,8 @@ class ControllerConfig:
             max_velocity=tuple(v[f"limits.{a}.max_velocity"] for a in axes),
             max_acceleration=tuple(v[f"limits.{a}.max_acceleration"] for a in axes),
             max_deceleration=tuple(v[f"limits.{a}.max_deceleration"] for a in axes),
+            max_speed=v["limits.linear.max_speed"] or math.inf,
+            max_jerk=tuple(v[f"limits.{a}.max_jerk"] or math.inf for a in axes),
             noise=OdometryNoise(v["odometry.linear_variance_per_meter"],
                                 v["odometry.angular_variance_per_radian"],
                                 v["odometry.angular_variance_per_meter"],

@@ -9,7 +9,8 @@ Each :meth:`BaseController.step` (called by the fixed-rate loop thread):
 3. picks the target twist: the latest command, or zero when disarmed, when
    the command is stale (older than ``cmd_timeout``) or when it was
    rejected as non-finite;
-4. limits it (speed, acceleration, deceleration: direction-preserving),
+4. limits it (speeds and the speed norm, acceleration, deceleration, jerk,
+   then the joints' accelerations: direction-preserving; docs/limits.md),
    maps it through the exact inverse kinematics at the measured joint
    positions, scales the joint rates uniformly to their speed limits, and
    writes them.
@@ -35,6 +36,7 @@ from holonomic_core.config import RobotConfig
 from holonomic_core.drift_watch import DriftWatch
 from holonomic_core.glitch_policy import GlitchPolicy
 from holonomic_core.driver import Driver, DriverError, DriverFault, DriverState, JointReading
+from holonomic_core.joint_acceleration import JointAccelerationLimit
 from holonomic_core.limits import TwistLimiter, is_finite_twist, joint_rate_saturation
 from holonomic_core.monitor import ReadingMonitor
 from holonomic_core.odometry import Odometry
@@ -107,7 +109,14 @@ class BaseController:
         self.driver = driver
         self.dt = 1.0 / c.control_rate
         self.cmd_timeout = c.cmd_timeout
-        self.limiter = TwistLimiter(c.max_velocity, c.max_acceleration, c.max_deceleration)
+        self.limiter = TwistLimiter(c.max_velocity, c.max_acceleration, c.max_deceleration,
+                                    c.max_speed, c.max_jerk)
+        #: joints.*.max_acceleration (None: no joint has one)
+        self.joint_acceleration = JointAccelerationLimit.from_config(self.model, config.values)
+        # (twist_command, a copy of it, the one before): the last step's twist
+        # acceleration for the jerk limits, valid while twist_command is that
+        # very array, unchanged (every reset assigns or zeroes it)
+        self._twist_memory: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.odometry = Odometry(self.model, c.estimator, c.noise, c.twist_window)
         self.slip_monitor = SlipMonitor(getattr(self.model.kinematics, "caster_names", ()),
                                         c.slip)
@@ -308,7 +317,10 @@ class BaseController:
             # proportional pull onto the reference pose (in base_link)
             pull = TRAJECTORY_GAIN * relative_pose(self.odometry.pose, sample[0])
             target = np.asarray(sample[1], float) + pull
-        twist = self.limiter.limit(target, self.twist_command, self.dt)
+        twist = self.limiter.limit(target, self.twist_command, self.dt, self._twist_acceleration())
+        if self.joint_acceleration is not None:
+            twist = self.joint_acceleration.limit(reading.positions, twist, self.twist_command,
+                                                  self.joint_command, self.dt)
         rates = self.model.kinematics.inverse(reading.positions, twist)
         rates, scale = self._saturate(rates, self._max_rates)
         try:
@@ -331,10 +343,22 @@ class BaseController:
             self._on_fault(exc)
             return False
         # The limiter continues from what was really commanded.
+        before = self.twist_command
         self.twist_command = twist * scale if scale < 1.0 else twist
+        self._twist_memory = (self.twist_command, self.twist_command.copy(), before.copy())
         self.joint_command = rates
-        self.saturation = scale
+        self.saturation = scale if self.joint_acceleration is None \
+            else scale * self.joint_acceleration.speed_scale
         return True
+
+    def _twist_acceleration(self) -> np.ndarray | None:
+        """The last step's twist acceleration [m/s^2, m/s^2, rad/s^2] for the
+        jerk limits; None (from rest) after anything reset the command."""
+        memory = self._twist_memory
+        if memory is None or memory[0] is not self.twist_command \
+                or not np.array_equal(memory[1], self.twist_command):
+            return None
+        return (memory[1] - memory[2]) / self.dt
 
     def follow(self, trajectory: Callable[[float], tuple | None]) -> None:
         """Follow a trajectory (a precise move) instead of ``cmd_vel``.

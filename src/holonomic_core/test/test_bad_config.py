@@ -81,6 +81,25 @@ CASES = [
     ("missing joint limit of a caster",
      mutate_xr(r"^\s*rear_left_steer_joint: .*\n", ""),
      "joints.rear_left_steer_joint.max_velocity", "required"),
+    # twist and joint limits
+    ("negative speed norm", mutate(r"max_speed: 1.2", "max_speed: -1.2"),
+     "limits.linear.max_speed", "[0, 100]"),
+    ("speed norm too large", mutate(r"max_speed: 1.2", "max_speed: 1000.0"),
+     "limits.linear.max_speed", "[0, 100]"),
+    ("negative jerk", mutate(r"max_deceleration: 2.0, max_jerk: 0.0",
+                             "max_deceleration: 2.0, max_jerk: -3.0"),
+     "limits.linear.x.max_jerk", "[0, 100000]"),
+    ("jerk not a number", mutate(r"max_deceleration: 10.0, max_jerk: 0.0",
+                                 "max_deceleration: 10.0, max_jerk: high"),
+     "limits.angular.z.max_jerk", "a number"),
+    ("negative joint acceleration", mutate(r"max_acceleration: 20.0", "max_acceleration: -20.0"),
+     "joints.turret_joint.max_acceleration", "[0, 1e+06]"),
+    ("infinite joint acceleration",
+     mutate_xr(r"front_left_steer_joint: \{max_velocity: 12.0, max_effort: 5.0, "
+               r"max_acceleration: 400.0\}",
+               "front_left_steer_joint: {max_velocity: 12.0, max_effort: 5.0, "
+               "max_acceleration: .inf}"),
+     "joints.front_left_steer_joint.max_acceleration", "finite"),
     # typos are named as written, with the nearest key and the section's keys
     ("misspelt key in a section", mutate(r"physics_rate: 1000.0", "physics_rat: 1000.0"),
      "sim.physics_rat", "did you mean 'sim.physics_rate'? Valid keys of section 'sim': "),

@@ -177,6 +177,35 @@ def test_twist_limits_are_bitwise_those_of_the_pure_path(monkeypatch):
         assert got is not target and got is not previous
 
 
+@pytest.mark.parametrize("jerk", [(5.0, 4.0, 40.0), (math.inf, 3.0, math.inf)],
+                         ids=["every axis", "one axis"])
+def test_speed_norm_and_jerk_limits_are_bitwise_those_of_the_pure_path(monkeypatch, jerk):
+    pure, compiled = both(monkeypatch, lambda: TwistLimiter(
+        (1.0, 0.5, 2.0), (2.0, 1.0, 4.0), (4.0, 2.0, 8.0), max_speed=0.8, max_jerk=jerk))
+    rng = np.random.default_rng(3)
+    cases = [(rng.uniform(-3, 3, 3), rng.uniform(-1.2, 1.2, 3), rng.choice([0.001, 0.005, 0.1]),
+              rng.uniform(-10, 10, 3)) for _ in range(3000)]
+    z = np.zeros(3)
+    # at rest, arriving, a zero dt, an acceleration beyond the limits (clamped),
+    # NaN passing through, a far target with a tiny jerk step (the continuous bound)
+    cases += [(z, z, 0.005, z), (np.array([0.3, 0.2, 0.1]), np.array([0.3, 0.2, 0.1]), 0.005, z),
+              (np.array([0.5, 0.1, 0.0]), z, 0.0, z), (z, np.array([0.5, 0.0, 0.0]), 0.005,
+                                                       np.array([-50.0, 0.0, 0.0])),
+              (np.array([math.nan, 0.1, 0.0]), z, 0.005, z),
+              (np.array([0.8, 0.0, 0.0]), z, 1e-7, z)]
+    # ramps: each step's output and acceleration feed the next
+    for target, previous, dt, acc in list(cases[:50]):
+        for _ in range(40):
+            nxt = pure.limit(target, previous, dt, acc)
+            cases.append((target, previous, dt, acc))
+            previous, acc = nxt, (nxt - previous) / dt
+    for target, previous, dt, acc in cases:
+        with np.errstate(invalid="ignore"):
+            want = pure.limit(target, previous, dt, acc)
+        got = compiled.limit(target, previous, dt, acc)
+        assert same_bits(want, got), (target, previous, dt, acc, want, got)
+
+
 def test_joint_rate_saturation_is_bitwise_that_of_the_pure_path():
     rng = np.random.default_rng(2)
     limits = np.array([20.0, 20.0, 4.0, 6.0])
