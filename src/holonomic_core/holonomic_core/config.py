@@ -35,6 +35,7 @@ from holonomic_core.description import Description, description_class
 from holonomic_core.drift_watch import DRIFT_SPECS
 from holonomic_core.driver import driver_class, driver_names, sim_drives_driver
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics, kinematics_class
+from holonomic_core.joint_range import checked_range, range_specs
 from holonomic_core.loop import LOOP_SPECS
 from holonomic_core.model import JointLimits, RobotModel
 from holonomic_core.monitor import MonitorLimits
@@ -75,7 +76,7 @@ def joint_specs(joint: str) -> list[ParamSpec]:
                   "zero (a steering joint: the wheel rolls along base_link x; the turret: the "
                   "drive base faces base_link x); holonomic-calibrate estimates it.",
                   default=0.0, minimum=-3.2, maximum=3.2),
-    ]
+    ] + range_specs(joint)
 
 
 
@@ -440,7 +441,8 @@ def build_model(flat: Mapping[str, Any]) -> tuple[RobotModel, list[ParamSpec]]:
     jvalues = validate(jspecs, flat)
     values.update(jvalues)
     limits = tuple(JointLimits(jvalues[f"joints.{j}.max_velocity"],
-                               jvalues[f"joints.{j}.max_effort"])
+                               jvalues[f"joints.{j}.max_effort"],
+                               *checked_range(j, jvalues))
                    for j in kinematics.joint_names)
     model = RobotModel(values["robot.name"], kinematics, limits, MappingProxyType(values))
     return model, specs + jspecs

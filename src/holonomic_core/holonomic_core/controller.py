@@ -33,6 +33,7 @@ import numpy as np
 from holonomic_core.config import RobotConfig
 from holonomic_core.drift_watch import DriftWatch
 from holonomic_core.driver import Driver, DriverError, DriverFault, DriverState, JointReading
+from holonomic_core.joint_range import JointRangeGuard
 from holonomic_core.limits import TwistLimiter, is_finite_twist, joint_rate_saturation
 from holonomic_core.monitor import ReadingMonitor
 from holonomic_core.odometry import Odometry
@@ -77,6 +78,8 @@ class ControllerStatus:
     drift_findings: tuple[str, ...] | None    #: None: no drift watch for this robot
     drift_judged: bool                   #: the drift watch has enough motion to judge
     drift_values: Mapping[str, str]
+    #: joints slowed at their position range in the last 2 s
+    range_limited: tuple[str, ...] = ()
 
 
 #: how far back a command while disarmed makes the status say so [s]
@@ -113,6 +116,9 @@ class BaseController:
         self._max_rates = self.model.max_joint_velocity
         # compiled or pure, as the limiter, kinematics and odometry (hot_path)
         self._saturate = joint_rate_saturation()
+        #: keeps ranged joints inside their range (None: all continuous)
+        self.range_guard = JointRangeGuard.from_model(self.model, c.max_deceleration,
+                                                      2.0 * self.dt)
         corrections = self.model.zero_corrections
         self._zero_corrections = corrections if corrections.any() else None
         #: the calibration drift watch (None where it does not apply)
@@ -229,7 +235,9 @@ class BaseController:
             slip_threshold=self.slip_monitor.limits.threshold,
             drift_findings=None if self.drift is None else tuple(self.drift.findings()),
             drift_judged=self.drift is not None and self.drift.error is not None,
-            drift_values={} if self.drift is None else dict(self.drift.values()))
+            drift_values={} if self.drift is None else dict(self.drift.values()),
+            range_limited=() if self.range_guard is None else
+            self.range_guard.limited(self._clock(), DISARMED_COMMAND_WINDOW))
 
     # -- the cycle (loop thread) ----------------------------------------------------
     def step(self, take_command: Callable[[], None] | None = None) -> bool:
@@ -288,6 +296,11 @@ class BaseController:
         twist = self.limiter.limit(target, self.twist_command, self.dt)
         rates = self.model.kinematics.inverse(reading.positions, twist)
         rates, scale = self._saturate(rates, self._max_rates)
+        if self.range_guard is not None:
+            # slow down (direction kept) so that no ranged joint passes its range
+            keep = self.range_guard.scale(reading.positions, rates, twist * scale, self._clock())
+            if keep < 1.0:
+                rates, scale = rates * keep, scale * keep
         try:
             if self.torque is None:
                 self.driver.write_velocities(rates)
