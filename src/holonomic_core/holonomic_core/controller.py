@@ -40,6 +40,7 @@ from holonomic_core.odometry import Odometry
 from holonomic_core.se2 import relative_pose
 from holonomic_core.slip_monitor import SlipMonitor
 from holonomic_core.torque import OperationalSpaceController
+from holonomic_core import unwind
 
 
 class ControllerState(enum.Enum):
@@ -80,6 +81,8 @@ class ControllerStatus:
     drift_values: Mapping[str, str]
     #: joints slowed at their position range in the last 2 s
     range_limited: tuple[str, ...] = ()
+    #: the unwind maneuver: running (progress) or how the last one ended; None: none yet
+    unwind: str | None = None
 
 
 #: how far back a command while disarmed makes the status say so [s]
@@ -133,6 +136,8 @@ class BaseController:
         self._command: tuple[np.ndarray, float] | None = None
         # (trajectory, start time) while following one (see follow)
         self._trajectory: tuple[Callable, float | None] | None = None
+        #: the unwind maneuver running or last run (request_unwind)
+        self.maneuver: unwind.UnwindManeuver | None = None
         self._requests: list[tuple[str, Any, concurrent.futures.Future]] = []
         self._requests_lock = threading.Lock()
         # outputs of the last cycle, read by the ROS shell in the loop thread
@@ -174,6 +179,7 @@ class BaseController:
             what = "non-finite" if values is not None else "malformed"
             return f"{what} command {repr(twist)[:80]} rejected; stopping the base"
         self._command = (values, now)
+        self._cancel_unwind("a new cmd_vel")
         if values.any() and self.state is not ControllerState.ARMED:
             self.counters["commands_while_disarmed"] += 1
             self.last_command_while_disarmed = now
@@ -194,6 +200,17 @@ class BaseController:
     def request_reset_odometry(self) -> concurrent.futures.Future:
         """Ask the loop to reset the odometry pose to the origin."""
         return self._request("reset_odometry", None)
+
+    def request_unwind(self) -> concurrent.futures.Future:
+        """Ask the loop to start the unwind maneuver (:mod:`holonomic_core.unwind`):
+        every ranged joint back to the middle of its range, the base back at
+        its pose. The future resolves to ``(success, plan or why not)`` once
+        it starts; :meth:`status` reports its progress and how it ended."""
+        return self._request("unwind", None)
+
+    def _cancel_unwind(self, reason: str) -> None:
+        if self.maneuver is not None:
+            self.maneuver.cancel(reason)
 
     def _request(self, kind: str, arg: Any) -> concurrent.futures.Future:
         future: concurrent.futures.Future = concurrent.futures.Future()
@@ -237,7 +254,8 @@ class BaseController:
             drift_judged=self.drift is not None and self.drift.error is not None,
             drift_values={} if self.drift is None else dict(self.drift.values()),
             range_limited=() if self.range_guard is None else
-            self.range_guard.limited(self._clock(), DISARMED_COMMAND_WINDOW))
+            self.range_guard.limited(self._clock(), DISARMED_COMMAND_WINDOW),
+            unwind=None if self.maneuver is None else self.maneuver.status())
 
     # -- the cycle (loop thread) ----------------------------------------------------
     def step(self, take_command: Callable[[], None] | None = None) -> bool:
@@ -285,8 +303,12 @@ class BaseController:
             self.saturation = 1.0
             return True
 
-        sample = self._trajectory_sample()
-        if sample is None:
+        maneuver = None if self.maneuver is None else self.maneuver.target(
+            self.odometry.pose, reading.positions, self._clock())
+        sample = None if maneuver is not None else self._trajectory_sample()
+        if maneuver is not None:
+            target = maneuver
+        elif sample is None:
             target = self._target()
         else:
             # velocity mode follows the sample by feed-forward twist plus a
@@ -377,6 +399,8 @@ class BaseController:
             try:
                 if kind == "enable":
                     result = self._arm() if arg else self._disarm()
+                elif kind == "unwind":
+                    result = self._start_unwind()
                 else:
                     self.odometry.reset()
                     self.slip_monitor.reset()
@@ -385,6 +409,20 @@ class BaseController:
                 self._on_fault(exc)
                 result = (False, f"driver error: {exc}")
             future.set_result(result)
+
+    def _start_unwind(self) -> tuple[bool, str]:
+        if not self.driver.armed:
+            return False, f"cannot unwind: the motors are {self.state.value} (holonomic-ctl enable)"
+        reading = self.reading
+        maneuver, result = unwind.begin(self.model, None if reading is None else reading.positions,
+                                        self.odometry.pose, self.config.controller.max_velocity[:2],
+                                        self._clock())
+        if maneuver is not None:
+            # the commands before it are not resumed after it
+            self._command = (_ZERO3, self._clock())
+            self._trajectory = None
+            self.maneuver = maneuver
+        return result
 
     def _arm(self) -> tuple[bool, str]:
         if self.driver.armed:
@@ -402,6 +440,7 @@ class BaseController:
         # Start from rest and ignore commands (and trajectories) sent before arming.
         self._command = None
         self._trajectory = None
+        self._cancel_unwind("motors re-armed")
         self.twist_command = np.zeros(3)
         if self.torque is not None:
             self.torque.reset(self.odometry.pose)
@@ -411,6 +450,7 @@ class BaseController:
         self.driver.deactivate()
         self.twist_command = np.zeros(3)
         self._trajectory = None
+        self._cancel_unwind("motors disarmed")
         return True, "motors disarmed"
 
     def _on_fault(self, exc: DriverError) -> None:
@@ -427,6 +467,7 @@ class BaseController:
             self.fault = reason
         self.twist_command = np.zeros(3)
         self._trajectory = None
+        self._cancel_unwind(f"fault: {reason}")
         self.joint_command[:] = 0.0
         try:
             self.driver.deactivate()
