@@ -291,6 +291,7 @@ class BaseControllerNode(Node):
         self.urdf = generate_urdf(self.config.model)
         self.description_pub.publish(String(data=self.urdf))
         self.create_service(Trigger, "~/reset_odometry", self._on_reset_odometry)
+        self.create_service(Trigger, "~/unwind", self._on_unwind)
         self.create_service(SetBool, "~/enable", self._on_enable)
 
         # Every cycle's messages have a fixed layout (names, frames, array
@@ -411,6 +412,12 @@ class BaseControllerNode(Node):
 
     def _on_reset_odometry(self, request, response):
         response.success, response.message = self._wait(self.link.request_reset_odometry())
+        return response
+
+    def _on_unwind(self, request, response):
+        # answers once the maneuver starts; diagnostics report its progress
+        response.success, response.message = self._wait(self.link.request_unwind())
+        self.get_logger().info(f"~/unwind: {response.message}")
         return response
 
     # -- from the loop (the loop client's reader thread) ----------------------------
@@ -594,6 +601,8 @@ class BaseControllerNode(Node):
         }
         if status.range_limited:
             values["range_limited_joints"] = " ".join(status.range_limited)
+        if status.unwind is not None:
+            values["unwind"] = status.unwind
         # WARN while commands arrive that the disarmed motors cannot follow
         # (within the last 2 diagnostics periods)
         if status.commanded_while_disarmed:
@@ -606,6 +615,9 @@ class BaseControllerNode(Node):
                 f"{NODE_NAME}: command", DiagnosticStatus.WARN,
                 "slowed to stop at the end of the range of " + ", ".join(status.range_limited)
                 + " (motions that turn it back are accepted; holonomic-ctl unwind)", values)
+        if status.unwinding:
+            return self._status_msg(f"{NODE_NAME}: command", DiagnosticStatus.OK,
+                                    f"unwinding ({status.unwind})", values)
         return self._status_msg(f"{NODE_NAME}: command", DiagnosticStatus.OK,
                                 "stale: stopping" if status.stale else "tracking", values)
 

@@ -83,6 +83,7 @@ class ControllerStatus:
     range_limited: tuple[str, ...] = ()
     #: the unwind maneuver: running (progress) or how the last one ended; None: none yet
     unwind: str | None = None
+    unwinding: bool = False              #: the unwind maneuver is running
 
 
 #: how far back a command while disarmed makes the status say so [s]
@@ -255,7 +256,8 @@ class BaseController:
             drift_values={} if self.drift is None else dict(self.drift.values()),
             range_limited=() if self.range_guard is None else
             self.range_guard.limited(self._clock(), DISARMED_COMMAND_WINDOW),
-            unwind=None if self.maneuver is None else self.maneuver.status())
+            unwind=None if self.maneuver is None else self.maneuver.status(),
+            unwinding=self.maneuver is not None and self.maneuver.result is None)
 
     # -- the cycle (loop thread) ----------------------------------------------------
     def step(self, take_command: Callable[[], None] | None = None) -> bool:

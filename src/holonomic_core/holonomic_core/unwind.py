@@ -375,12 +375,19 @@ class UnwindManeuver:
         self._started = now
         self._progress_at = (0.0, now)     # (path done [m], clock [s]) of the last progress
         self._cancel: str | None = None
-        #: None while it runs; then (success, text)
-        self.result: tuple[bool, str] | None = None
+        self._result: tuple[bool, str] | None = None
+
+    @property
+    def result(self) -> tuple[bool, str] | None:
+        """None while it runs; then (success, text)."""
+        if self._result is None and self._cancel is not None:
+            return False, f"unwind cancelled: {self._cancel}"
+        return self._result
 
     def cancel(self, reason: str) -> None:
-        """Stop the maneuver at the next cycle (the base ramps to rest)."""
-        if self.result is None:
+        """Stop the maneuver (any thread): no more twist from it, the base
+        ramps to rest under the limits."""
+        if self._result is None and self._cancel is None:
             self._cancel = reason
 
     def progress(self) -> float:
@@ -395,15 +402,12 @@ class UnwindManeuver:
                 f"({self.plan.loops} loop(s))")
 
     def _finish(self, success: bool, text: str) -> None:
-        self.result = (success, text)
+        self._result = (success, text)
 
     def target(self, pose, positions, now: float):
         """The twist for this cycle at odometry ``pose`` (x, y, yaw) and joint
         ``positions``, or None (then see :attr:`result`)."""
         if self.result is not None:
-            return None
-        if self._cancel is not None:
-            self._finish(False, f"unwind cancelled: {self._cancel}")
             return None
         plan = self.plan
         if now - self._started > 2.0 * plan.duration + 10.0:
