@@ -340,15 +340,34 @@ def plan_unwind(model, positions, pose, max_speed=(math.inf, math.inf)) -> Unwin
                      for seg in loop_segments((x0, y0), a + yaw, e + yaw, sense, extra,
                                               fillet, radius))
 
-    loops = min(plans, key=lambda ls: sum(seg.length for seg in segments_of(ls)))
-    turn = sum(loop_turn(sense, a, e, delta) + sense * 2.0 * math.pi * extra
-               for sense, a, e, extra in loops)
-    ends, worst = [], 0.0
-    for j in joints:
-        swing = wrap_angle(start - j.direction(positions[j.index]))
-        end = positions[j.index] + j.sigma * (swing + turn)
-        ends.append(float(end))
-        worst = max(worst, abs(end - j.middle))
+    swings = [wrap_angle(start - j.direction(positions[j.index])) for j in joints]
+
+    def joint_path(loops):
+        """Each follower joint's position after the lead and after each loop."""
+        out, turned = [], 0.0
+        for sense, a, e, extra in [(0, 0.0, 0.0, 0)] + loops:
+            if sense:
+                turned += loop_turn(sense, a, e, delta) + sense * 2.0 * math.pi * extra
+            out.append([positions[j.index] + j.sigma * (w + turned)
+                        for j, w in zip(joints, swings)])
+        return out
+
+    def inside(loops):
+        # a joint turns monotonically within a loop: its ends bound it
+        return all(j.lower - 1e-9 <= q <= j.upper + 1e-9 or
+                   abs(q - j.middle) < abs(q0 - j.middle)     # already outside: coming back
+                   for qs in joint_path(loops)
+                   for j, q, q0 in zip(joints, qs, (positions[j.index] for j in joints)))
+
+    valid = [ls for ls in plans if inside(ls)]
+    if not valid:
+        raise UnwindError(
+            "every way round would drive a joint past its range (a loop turns the joints by at "
+            f"least {math.degrees(math.pi + 2 * delta):.0f} deg: a joint nearer its middle "
+            "than that at the end of a narrow range cannot be unwound by loops)")
+    loops = min(valid, key=lambda ls: sum(seg.length for seg in segments_of(ls)))
+    ends = [float(q) for q in joint_path(loops)[-1]]
+    worst = max(abs(e - j.middle) for e, j in zip(ends, joints))
     if worst > math.radians(5.0):
         wound = ", ".join(f"{j.name} {positions[j.index]:+.2f} rad" for j in joints)
         raise UnwindError(f"no translation brings every ranged joint to its middle ({wound}): "

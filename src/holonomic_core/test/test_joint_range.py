@@ -155,8 +155,19 @@ def test_nothing_to_unwind_near_the_middle_and_a_clear_refusal_without_ranges():
 def test_casters_wound_by_different_turns_are_refused():
     q = np.zeros(8)
     q[0], q[2] = 2 * math.pi, -2 * math.pi
-    with pytest.raises(ValueError, match="different turns"):
+    # one translation turns every caster alike: -2 pi for the first is -4 pi,
+    # past its range, for the second
+    with pytest.raises(ValueError, match="past its range"):
         plan_unwind(xr4000_ranged(), q, (0, 0, 0))
+
+
+def test_a_half_turn_range_wound_to_its_end_is_refused_with_the_reason():
+    # at the end of a +-pi range the joint needs a turn of pi, less than one
+    # loop turns (pi + 2 delta), and a figure of eight would pass its end
+    q = np.zeros(8)
+    q[0::2] = math.pi
+    with pytest.raises(ValueError, match="past its range"):
+        plan_unwind(xr4000_ranged(0.5), q, (0, 0, 0))
 
 
 def test_config_from_a_params_file_with_a_turret_range(tmp_path):
