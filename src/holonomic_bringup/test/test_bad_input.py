@@ -28,6 +28,11 @@ BRINGUP = [
     (["hamr", "-p", "control_rate:=[1"], "not valid YAML"),
     (["hamr", "-p", "control_rate:=fast"], "'control_rate' = 'fast': expected a number"),
     (["hamr", "-p", "sim.wheel_fiction:=0.8"], "did you mean 'sim.wheel_friction'"),
+    (["hamr", "-p", "joints.turret_joint.min_position:=-3.0"],
+     "'joints.turret_joint.max_position' = '<missing>': expected a number: a range needs both"),
+    (["hamr", "-p", "joints.turret_joint.min_position:=1.0",
+      "-p", "joints.turret_joint.max_position:=-1.0"],
+     "'joints.turret_joint.max_position' = -1.0: expected at least min_position + 0.5 rad"),
     (["hamr", "--namespace", "my robot"], "'my robot' is not a ROS namespace"),
     (["hamr", "--namespace", "1abc"], "'1abc' is not a ROS namespace"),
     (["hamr", "--params-file", "/nonexistent/params.yaml"], "--params-file: no such file"),
@@ -66,6 +71,9 @@ CTL = [
     (["enable", "--namespace", "my robot"], "'my robot' is not a ROS namespace"),
     (["status", "--timeout", "0"], "--timeout: expected a number in (0, 600] s"),
     (["enable", "--json"], "--json goes with status only"),
+    (["unwind", "--json"], "--json goes with status only"),
+    (["unwind", "--timeout", "-1"], "--timeout: expected a number in (0, 600] s"),
+    (["unwnd"], "invalid choice: 'unwnd'"),
 ]
 
 PLOT = [

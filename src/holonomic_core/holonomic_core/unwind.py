@@ -18,30 +18,39 @@ joint by ``sigma_j A``. :func:`follower_joints` finds ``sigma_j``, ``c_j`` and
 joints follow the travel direction is served (a joint that does not -- a
 swerve module's steering, which turns at rest -- is left alone and named).
 
-The path (constant heading, odom frame): a *teardrop* through the start
-``P0``. An out leg of length ``L`` in direction ``alpha_out``; an arc of
-radius ``R`` that turns the direction by ``s (pi + gamma) + s 2 pi k`` (sense
-``s = +-1``, ``k`` extra full loops); a back leg of length ``L`` in direction
-``alpha_f`` into ``P0``. The two legs form a V of opening ``gamma = 2
-atan(R / L)`` at ``P0`` and the arc is the circle inscribed in it, tangent at
-distance ``L`` from ``P0``: the path is closed and smooth. ``alpha_f`` is the
-direction at which the joints sit at the middle of their ranges; the
-joint first swings the short way from where it points to ``alpha_out``
-(``wrap(alpha_out - alpha_j0)``), then follows the arc, so that it ends at
-``q_j + sigma_j (wrap(alpha_out - alpha_j0) + s (pi + gamma + 2 pi k))``:
-:func:`plan_unwind` picks ``s`` and ``k`` that put every joint nearest the
-middle, never past an end of its range on the way.
+The path (constant heading, odom frame) is made of *loops* through the
+start ``P0``. One loop: an out leg from ``P0`` in the direction ``a`` (the
+direction the joints point to, turned by LEAD towards the middle), a fillet
+of radius ``rho``, the big circle of radius ``R`` about ``P0`` (sense ``s =
++-1``, as many extra full turns as needed), a fillet, and an in leg back to
+``P0`` in the direction ``e``. The fillets are tangent to a leg and inside
+the big circle, ``sin(delta) = rho / (R - rho)``, so the path is smooth and
+closed; along it the direction of travel turns by ``s (pi + 2 delta +
+span)`` with the big circle's polar span ``span = (s (e - a + pi) - 2
+delta) mod 2 pi``, plus ``s 2 pi`` per extra turn (:func:`loop_turn`). A
+joint that needs a turn ``N = sigma (middle - q)`` of the direction of
+travel gets one loop of the sense of ``N`` ending in the direction ``e`` at
+which the joints sit at their middle; when ``|N|`` is less than one loop's
+turn, a figure of eight: a loop one way to a direction between, then one the
+other way. :func:`plan_unwind` takes the shortest of these that never drives
+a joint past its range (a joint turns monotonically within a loop, so the
+loops' ends bound it) and refuses, saying why, when none does (joints wound
+by different turns, which a translation turns alike; or a joint at the end
+of a narrow range less than ``pi + 2 delta`` from its middle).
 
 Sizes (``b`` the largest follower length: the caster offset, the DDROT's
-turret offset). ``R = max(1.5 b, R_MIN)``: on the arc the joint lags the
-direction by ``asin(b / R)`` (42 deg), which the back leg of ``L = max(4 b,
-2 R)`` removes to ``2 atan(tan(21 deg) e^-4)`` = 1 deg (the caster decay
-above). Footprint: base_link stays within ``L / cos(gamma / 2) + R`` of the
-start (0.95 m for HAMR, b = 0.164 m; 0.16 m for the XR4000, b = 0.02 m).
-Length ``2 L + R (pi + gamma + 2 pi k)``, at the maneuver's speed
-``v = min(0.25 m/s, half the linear speed limits, 0.4 R x the slowest ranged
-joint's speed limit)`` (on the arc the joint turns at ``v / R``); its duration
-is that over ``v`` plus the ramps and the final approach, about 2 s more.
+turret offset): ``rho = max(1.5 b, R_MIN)``, ``R = 4 rho`` (``delta`` = 19.5
+deg). On a fillet the joint lags the direction of travel by ``asin(b /
+rho)`` = 42 deg; the in leg of ``(R - rho) cos(delta)`` = 4.2 b removes it to
+``2 atan(tan(21 deg) e^-4.2)`` = 1 deg. Footprint: base_link stays within
+``R = 6 b`` of the start (0.98 m for HAMR, b = 0.164 m; 0.20 m for the
+XR4000, whose 5 cm smallest fillet sets it). A loop's length is ``2 (R -
+rho) cos(delta) + 2 rho (pi / 2 + delta) + R (span + 2 pi k)``, at the
+maneuver's speed ``v = min(0.25 m/s, half the linear speed limits, 0.4 rho
+x the slowest ranged joint's speed limit)`` (on a fillet the joint turns at
+``v / rho``); the duration is the length over ``v`` plus the ramps and the
+final approach (:attr:`UnwindPlan.duration`). The plan states both; the
+simulator tests (src/holonomic_sim/test/test_unwind_sim.py) check them.
 
 :class:`UnwindManeuver` runs the path closed loop on the odometry, once per
 control cycle: it projects the pose on the path, commands the tangent speed
@@ -70,6 +79,7 @@ SPEED = 0.25
 #: [rad] the joints count as unwound within this of the middle of their range
 TOLERANCE = math.radians(2.0)
 #: [rad] how far the out leg turns the joints towards the middle of their range
+#: (a joint at the end of its range is not pushed past it by the path's corrections)
 LEAD = math.radians(10.0)
 #: [s] no progress along the path for this long: the maneuver gives up
 STALL_TIME = 3.0

@@ -120,7 +120,7 @@ def test_invalid_yaml_is_rejected_naming_the_key(tmp_path, case, text, key, allo
     assert allowed in str(err.value)
 
 
-@pytest.mark.parametrize("index", [1, 3, 9, 13, 17, 18], ids=lambda i: CASES[i][0])
+@pytest.mark.parametrize("index", [1, 3, 9, 13, 17, 18, 26], ids=lambda i: CASES[i][0])
 def test_bringup_exits_2_with_one_line_naming_the_key(start_bringup, tmp_path, index):
     case, text, key, allowed = CASES[index]
     path = tmp_path / "robot.yaml"
