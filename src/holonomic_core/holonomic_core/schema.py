@@ -81,6 +81,8 @@ class ParamSpec:
     def coerce(self, value: Any) -> Any:
         """Return ``value`` converted to this type or raise :class:`ConfigError`."""
         if value is None:
+            if self.optional:       # written out unset (a recording's config): still unset
+                return None
             raise ConfigError(self.name, value, self.allowed())
         if self.type == "double":
             out = self._number(value, self.name)
