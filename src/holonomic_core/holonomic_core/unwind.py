@@ -3,11 +3,11 @@ of its range while the base keeps its heading and ends where it started.
 
 Why a translation. Neither family can turn these joints with the base at
 rest. A powered caster's steering rate is ``phi_dot = v sin(alpha - phi) / b
-+ (...) wz`` (:mod:`pcv_base.powered_caster`, eq. 7): with ``wz = 0`` and the
++ (...) wz`` (the PCV family's kinematics, eq. 7 of Holmberg & Khatib): with ``wz = 0`` and the
 base translating at speed ``v`` in the direction ``alpha`` (base_link), the
 steering angle tends to ``alpha`` (``alpha - phi`` decays; ``phi = alpha + pi``
 is the unstable twin). The DDROT's turret rate is ``phi_dot = wz - wd`` with
-``wd = v sin(alpha + phi) / b`` (:mod:`hamr_base.offset_turret`): at constant
+``wd = v sin(alpha + phi) / b`` (the DDROT family's kinematics): at constant
 heading the turret angle tends to ``-alpha``. In both, a *follower joint*
 ``j`` settles at ``q_j = sigma_j alpha + c_j (mod 2 pi)``, ``sigma_j = +-1``,
 with the decay ``d(delta)/ds = -sin(delta) / b_j`` per metre travelled
@@ -50,7 +50,7 @@ maneuver's speed ``v = min(0.25 m/s, half the linear speed limits, 0.4 rho
 x the slowest ranged joint's speed limit)`` (on a fillet the joint turns at
 ``v / rho``); the duration is the length over ``v`` plus the ramps and the
 final approach (:attr:`UnwindPlan.duration`). The plan states both; the
-simulator tests (src/holonomic_sim/test/test_unwind_sim.py) check them.
+simulator tests (test_unwind_sim.py of the simulator package) check them.
 
 :class:`UnwindManeuver` runs the path closed loop on the odometry, once per
 control cycle: it projects the pose on the path, commands the tangent speed
