@@ -180,7 +180,7 @@ class BaseController:
             what = "non-finite" if values is not None else "malformed"
             return f"{what} command {repr(twist)[:80]} rejected; stopping the base"
         self._command = (values, now)
-        self._cancel_unwind("a new cmd_vel")
+        self.cancel_unwind("a new cmd_vel")
         if values.any() and self.state is not ControllerState.ARMED:
             self.counters["commands_while_disarmed"] += 1
             self.last_command_while_disarmed = now
@@ -209,7 +209,9 @@ class BaseController:
         it starts; :meth:`status` reports its progress and how it ended."""
         return self._request("unwind", None)
 
-    def _cancel_unwind(self, reason: str) -> None:
+    def cancel_unwind(self, reason: str) -> None:
+        """Cancel a running unwind maneuver (any thread): the base ramps to rest
+        under the limits; its status says why (e-stop, a new command, ...)."""
         if self.maneuver is not None:
             self.maneuver.cancel(reason)
 
@@ -442,7 +444,7 @@ class BaseController:
         # Start from rest and ignore commands (and trajectories) sent before arming.
         self._command = None
         self._trajectory = None
-        self._cancel_unwind("motors re-armed")
+        self.cancel_unwind("motors re-armed")
         self.twist_command = np.zeros(3)
         if self.torque is not None:
             self.torque.reset(self.odometry.pose)
@@ -452,7 +454,7 @@ class BaseController:
         self.driver.deactivate()
         self.twist_command = np.zeros(3)
         self._trajectory = None
-        self._cancel_unwind("motors disarmed")
+        self.cancel_unwind("motors disarmed")
         return True, "motors disarmed"
 
     def _on_fault(self, exc: DriverError) -> None:
@@ -469,7 +471,7 @@ class BaseController:
             self.fault = reason
         self.twist_command = np.zeros(3)
         self._trajectory = None
-        self._cancel_unwind(f"fault: {reason}")
+        self.cancel_unwind(f"fault: {reason}")
         self.joint_command[:] = 0.0
         try:
             self.driver.deactivate()
