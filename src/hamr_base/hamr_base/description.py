@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Mapping
 
 from holonomic_core.description import (BALL_CLEARANCE, GAP, Description, Inertia, box,
-                                        cylinder, inertial, joint_limits, joint_xml,
+                                        cylinder, inertial, joint_limits, joint_range, joint_xml,
                                         robot_xml, sphere, visual_and_collision,
                                         wheel_shapes)
 from holonomic_core.schema import ConfigError, ParamSpec
@@ -109,8 +109,10 @@ class OffsetTurretDescription(Description):
             + visual_and_collision(sphere(r_s), (-b - ball_x, 0, back_z))
             + "</link>")
         effort, velocity = joint_limits(model, "turret_joint")
+        # axis -z: the URDF angle is phi itself, so the range carries over as is
         parts.append(joint_xml("turret_joint", "continuous", "base_link", "drive_base",
-                            (0, 0, z_axle), (0, 0, -1), effort, velocity))
+                            (0, 0, z_axle), (0, 0, -1), effort, velocity,
+                            **joint_range(model, "turret_joint")))
         for side, y, r_side in (("left", a, k.r_left), ("right", -a, k.r_right)):
             link = f"{side}_wheel"
             parts.append(f'<link name="{link}">'

@@ -37,6 +37,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
@@ -255,6 +256,8 @@ class BaseControllerNode(Node):
                 value = list(value)
             if self.has_parameter(spec.name):     # an override, declared without a schema
                 self.undeclare_parameter(spec.name)
+            if value is None:       # an optional key left unset: typed, without a value
+                value = Parameter.Type(_PARAM_TYPES[spec.type])
             self.declare_parameter(spec.name, value, descriptor(spec), ignore_override=True)
         names = {spec.name for spec in self.config.specs}
         for name in self._flat:
@@ -289,6 +292,7 @@ class BaseControllerNode(Node):
         self.urdf = generate_urdf(self.config.model)
         self.description_pub.publish(String(data=self.urdf))
         self.create_service(Trigger, "~/reset_odometry", self._on_reset_odometry)
+        self.create_service(Trigger, "~/unwind", self._on_unwind)
         self.create_service(SetBool, "~/enable", self._on_enable)
 
         # Every cycle's messages have a fixed layout (names, frames, array
@@ -407,6 +411,12 @@ class BaseControllerNode(Node):
 
     def _on_reset_odometry(self, request, response):
         response.success, response.message = self._wait(self.link.request_reset_odometry())
+        return response
+
+    def _on_unwind(self, request, response):
+        # answers once the maneuver starts; diagnostics report its progress
+        response.success, response.message = self._wait(self.link.request_unwind())
+        self.get_logger().info(f"~/unwind: {response.message}")
         return response
 
     # -- from the loop (the loop client's reader thread) ----------------------------
@@ -591,12 +601,25 @@ class BaseControllerNode(Node):
             "twist_command": " ".join(f"{v:.3f}" for v in status.twist_command),
             "commands_while_disarmed": str(status.commands_while_disarmed),
         }
+        if status.range_limited:
+            values["range_limited_joints"] = " ".join(status.range_limited)
+        if status.unwind is not None:
+            values["unwind"] = status.unwind
         # WARN while commands arrive that the disarmed motors cannot follow
         # (within the last 2 diagnostics periods)
         if status.commanded_while_disarmed:
             return self._status_msg(f"{NODE_NAME}: command", DiagnosticStatus.WARN,
                                     f"commands received while {status.state.value}: not moving "
                                     "(holonomic-ctl enable)", values)
+        if status.range_limited:
+            # the motion would wind a joint past its range: slowed, or stopped
+            return self._status_msg(
+                f"{NODE_NAME}: command", DiagnosticStatus.WARN,
+                "slowed to stop at the end of the range of " + ", ".join(status.range_limited)
+                + " (motions that turn it back are accepted; holonomic-ctl unwind)", values)
+        if status.unwinding:
+            return self._status_msg(f"{NODE_NAME}: command", DiagnosticStatus.OK,
+                                    f"unwinding ({status.unwind})", values)
         return self._status_msg(f"{NODE_NAME}: command", DiagnosticStatus.OK,
                                 "stale: stopping" if status.stale else "tracking", values)
 

@@ -4,6 +4,10 @@ the ros2 CLI (which a pip-only install does not have).
     holonomic-ctl enable           [--namespace NS]   arm the motors (~/enable true)
     holonomic-ctl disable          [--namespace NS]   disarm them (~/enable false)
     holonomic-ctl reset-odometry   [--namespace NS]   odometry pose back to the origin
+    holonomic-ctl unwind           [--namespace NS]   every ranged joint (steering, turret)
+                                                      back to the middle of its range by
+                                                      loops about the start; waits for the
+                                                      end (any cmd_vel or disable cancels)
     holonomic-ctl status           [--namespace NS]   armed/disarmed, fault and its cause,
                                                       loop rate, odometry pose, slip residuals
 
@@ -25,7 +29,7 @@ from holonomic_bringup.ros_names import namespace
 from holonomic_core.command_line import ArgumentParser, ShowDefaults, number
 
 PROG = "holonomic-ctl"
-COMMANDS = ("enable", "disable", "reset-odometry", "status")
+COMMANDS = ("enable", "disable", "reset-odometry", "status", "unwind")
 CONTROLLER = "base_controller"
 
 
@@ -70,6 +74,7 @@ def status_from_diagnostics(statuses: list[dict], pose) -> dict:
         "slip_residual_m_s": {k[len(prefix):-len(suffix)]: _float(v) for k, v in odo.items()
                               if k.startswith(prefix) and k.endswith(suffix)},
         "command": command.get("message"),
+        "unwind": command.get("values", {}).get("unwind"),
         "command_warning": command.get("level") == 1,
     }
 
@@ -160,6 +165,35 @@ def _status(node, ns: str, timeout: float):
     return status_from_diagnostics(statuses, pose), None
 
 
+def _await_unwind(node, ns: str, stall: float) -> tuple[bool, str]:
+    """Wait until the robot's diagnostics say the unwind ended: (unwound, its
+    last report). Gives up after ``stall`` [s] without diagnostics."""
+    import time
+
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from holonomic_bringup.process_guard import STOP
+
+    latest: dict = {}
+
+    def on_diagnostics(msg) -> None:
+        for s in msg.status:
+            if s.name == f"{CONTROLLER}: command":
+                latest["values"] = {kv.key: kv.value for kv in s.values}
+                latest["at"] = time.monotonic()
+    node.create_subscription(DiagnosticArray, f"{ns}/diagnostics", on_diagnostics, 10)
+    start = time.monotonic()
+    while not STOP.is_set():
+        time.sleep(0.1)
+        seen = latest.get("at", start)
+        if time.monotonic() - seen > stall:
+            return False, f"no diagnostics for {stall:g} s: the outcome is unknown"
+        report = latest.get("values", {}).get("unwind")
+        if "values" in latest and report is not None and not report.startswith("running"):
+            return report.startswith("unwound"), report
+    return False, "stopped waiting (the maneuver goes on: holonomic-ctl disable stops it)"
+
+
 def main(argv: list[str] | None = None) -> int:
     install_signal_handlers()
     args = parse_args(argv)
@@ -196,6 +230,14 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "reset-odometry":
             response, problem = _call(node, Trigger, f"{service}/reset_odometry",
                                       Trigger.Request(), args.timeout)
+        elif args.command == "unwind":
+            response, problem = _call(node, Trigger, f"{service}/unwind", Trigger.Request(),
+                                      args.timeout)
+            if problem is None and response.success and response.message.startswith("unwinding"):
+                print(f"unwind: {response.message}", flush=True)
+                ok, report = _await_unwind(node, ns, max(args.timeout, 5.0))
+                print(f"unwind: {report}", file=sys.stdout if ok else sys.stderr)
+                return 0 if ok else 1
         else:
             response, problem = _call(node, SetBool, f"{service}/enable",
                                       SetBool.Request(data=args.command == "enable"),

@@ -75,6 +75,10 @@ class RobotLink:
     def request_reset_odometry(self) -> concurrent.futures.Future:
         return self.client.request(("reset_odometry", self.index))
 
+    def request_unwind(self) -> concurrent.futures.Future:
+        """Start the unwind maneuver; resolves to (success, plan or why not)."""
+        return self.client.request(("unwind", self.index))
+
     def read_records(self) -> bool:
         """Read what the state pipe holds; ``on_record`` each whole record
         (the client's reader thread) until :meth:`LoopClient.stop` is

@@ -272,6 +272,9 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
         elif kind == "reset_odometry":
             _, k, rid = message
             robots[k].pending.append((robots[k].controller.request_reset_odometry(), rid))
+        elif kind == "unwind":
+            _, k, rid = message
+            robots[k].pending.append((robots[k].controller.request_unwind(), rid))
 
     def poll_control() -> None:
         while True:

@@ -41,6 +41,11 @@ BRINGUP = [
      "'limits.linear.x.max_jerk' = 'fast': expected a number"),
     (["hamr", "-p", "joints.turret_joint.max_acceleration:=-5"],
      "'joints.turret_joint.max_acceleration' = -5: expected a number in [0, 1e+06]"),
+    (["hamr", "-p", "joints.turret_joint.min_position:=-3.0"],
+     "'joints.turret_joint.max_position' = '<missing>': expected a number: a range needs both"),
+    (["hamr", "-p", "joints.turret_joint.min_position:=1.0",
+      "-p", "joints.turret_joint.max_position:=-1.0"],
+     "'joints.turret_joint.max_position' = -1.0: expected at least min_position + 0.5 rad"),
     (["hamr", "--namespace", "my robot"], "'my robot' is not a ROS namespace"),
     (["hamr", "--namespace", "1abc"], "'1abc' is not a ROS namespace"),
     (["hamr", "--params-file", "/nonexistent/params.yaml"], "--params-file: no such file"),
@@ -79,6 +84,9 @@ CTL = [
     (["enable", "--namespace", "my robot"], "'my robot' is not a ROS namespace"),
     (["status", "--timeout", "0"], "--timeout: expected a number in (0, 600] s"),
     (["enable", "--json"], "--json goes with status only"),
+    (["unwind", "--json"], "--json goes with status only"),
+    (["unwind", "--timeout", "-1"], "--timeout: expected a number in (0, 600] s"),
+    (["unwnd"], "invalid choice: 'unwnd'"),
 ]
 
 PLOT = [

@@ -37,6 +37,7 @@ from holonomic_core.drift_watch import DRIFT_SPECS
 from holonomic_core.glitch_policy import POLICIES as GLITCH_POLICIES, GlitchLimits
 from holonomic_core.driver import driver_class, driver_names, sim_drives_driver
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics, kinematics_class
+from holonomic_core.joint_range import checked_range, range_specs
 from holonomic_core.loop import LOOP_SPECS
 from holonomic_core.model import JointLimits, RobotModel
 from holonomic_core.monitor import MonitorLimits
@@ -81,7 +82,7 @@ def joint_specs(joint: str) -> list[ParamSpec]:
                   f"Acceleration limit of {joint} [rad/s^2]: the commanded twist's change "
                   "is scaled so that no joint's rate changes faster (joint_acceleration.py); "
                   "0: no limit.", default=0.0, minimum=0.0, maximum=1e6),
-    ]
+    ] + range_specs(joint)
 
 
 
@@ -479,7 +480,8 @@ def build_model(flat: Mapping[str, Any]) -> tuple[RobotModel, list[ParamSpec]]:
     jvalues = validate(jspecs, flat)
     values.update(jvalues)
     limits = tuple(JointLimits(jvalues[f"joints.{j}.max_velocity"],
-                               jvalues[f"joints.{j}.max_effort"])
+                               jvalues[f"joints.{j}.max_effort"],
+                               *checked_range(j, jvalues))
                    for j in kinematics.joint_names)
     model = RobotModel(values["robot.name"], kinematics, limits, MappingProxyType(values))
     return model, specs + jspecs

@@ -37,12 +37,14 @@ from holonomic_core.drift_watch import DriftWatch
 from holonomic_core.glitch_policy import GlitchPolicy
 from holonomic_core.driver import Driver, DriverError, DriverFault, DriverState, JointReading
 from holonomic_core.joint_acceleration import JointAccelerationLimit
+from holonomic_core.joint_range import JointRangeGuard
 from holonomic_core.limits import TwistLimiter, is_finite_twist, joint_rate_saturation
 from holonomic_core.monitor import ReadingMonitor
 from holonomic_core.odometry import Odometry
 from holonomic_core.se2 import relative_pose
 from holonomic_core.slip_monitor import SlipMonitor
 from holonomic_core.torque import OperationalSpaceController
+from holonomic_core import unwind
 
 
 class ControllerState(enum.Enum):
@@ -83,6 +85,11 @@ class ControllerStatus:
     drift_values: Mapping[str, str]
     dropped_readings: int = 0            #: invalid readings dropped (safety.glitch_policy)
     last_dropped: str | None = None      #: why the last one was
+    #: joints slowed at their position range in the last 2 s
+    range_limited: tuple[str, ...] = ()
+    #: the unwind maneuver: running (progress) or how the last one ended; None: none yet
+    unwind: str | None = None
+    unwinding: bool = False              #: the unwind maneuver is running
 
 
 #: how far back a command while disarmed makes the status say so [s]
@@ -127,6 +134,11 @@ class BaseController:
         self._max_rates = self.model.max_joint_velocity
         # compiled or pure, as the limiter, kinematics and odometry (hot_path)
         self._saturate = joint_rate_saturation()
+        #: keeps ranged joints inside their range (None: all continuous)
+        # with joint acceleration limits, a joint brakes no harder than its own
+        self.range_guard = JointRangeGuard.from_model(
+            self.model, c.max_deceleration, 2.0 * self.dt,
+            None if self.joint_acceleration is None else self.joint_acceleration.max_acceleration)
         corrections = self.model.zero_corrections
         self._zero_corrections = corrections if corrections.any() else None
         #: the calibration drift watch (None where it does not apply)
@@ -141,6 +153,8 @@ class BaseController:
         self._command: tuple[np.ndarray, float] | None = None
         # (trajectory, start time) while following one (see follow)
         self._trajectory: tuple[Callable, float | None] | None = None
+        #: the unwind maneuver running or last run (request_unwind)
+        self.maneuver: unwind.UnwindManeuver | None = None
         self._requests: list[tuple[str, Any, concurrent.futures.Future]] = []
         self._requests_lock = threading.Lock()
         # outputs of the last cycle, read by the ROS shell in the loop thread
@@ -182,6 +196,7 @@ class BaseController:
             what = "non-finite" if values is not None else "malformed"
             return f"{what} command {repr(twist)[:80]} rejected; stopping the base"
         self._command = (values, now)
+        self.cancel_unwind("a new cmd_vel")
         if values.any() and self.state is not ControllerState.ARMED:
             self.counters["commands_while_disarmed"] += 1
             self.last_command_while_disarmed = now
@@ -202,6 +217,19 @@ class BaseController:
     def request_reset_odometry(self) -> concurrent.futures.Future:
         """Ask the loop to reset the odometry pose to the origin."""
         return self._request("reset_odometry", None)
+
+    def request_unwind(self) -> concurrent.futures.Future:
+        """Ask the loop to start the unwind maneuver (:mod:`holonomic_core.unwind`):
+        every ranged joint back to the middle of its range, the base back at
+        its pose. The future resolves to ``(success, plan or why not)`` once
+        it starts; :meth:`status` reports its progress and how it ended."""
+        return self._request("unwind", None)
+
+    def cancel_unwind(self, reason: str) -> None:
+        """Cancel a running unwind maneuver (any thread): the base ramps to rest
+        under the limits; its status says why (e-stop, a new command, ...)."""
+        if self.maneuver is not None:
+            self.maneuver.cancel(reason)
 
     def _request(self, kind: str, arg: Any) -> concurrent.futures.Future:
         future: concurrent.futures.Future = concurrent.futures.Future()
@@ -244,7 +272,11 @@ class BaseController:
             drift_findings=None if self.drift is None else tuple(self.drift.findings()),
             drift_judged=self.drift is not None and self.drift.error is not None,
             drift_values={} if self.drift is None else dict(self.drift.values()),
-            dropped_readings=self.glitches.dropped, last_dropped=self.glitches.last)
+            dropped_readings=self.glitches.dropped, last_dropped=self.glitches.last,
+            range_limited=() if self.range_guard is None else
+            self.range_guard.limited(self._clock(), DISARMED_COMMAND_WINDOW),
+            unwind=None if self.maneuver is None else self.maneuver.status(),
+            unwinding=self.maneuver is not None and self.maneuver.result is None)
 
     # -- the cycle (loop thread) ----------------------------------------------------
     def step(self, take_command: Callable[[], None] | None = None) -> bool:
@@ -309,8 +341,12 @@ class BaseController:
             self.saturation = 1.0
             return True
 
-        sample = self._trajectory_sample()
-        if sample is None:
+        maneuver = None if self.maneuver is None else self.maneuver.target(
+            self.odometry.pose, reading.positions, self._clock())
+        sample = None if maneuver is not None else self._trajectory_sample()
+        if maneuver is not None:
+            target = maneuver
+        elif sample is None:
             target = self._target()
         else:
             # velocity mode follows the sample by feed-forward twist plus a
@@ -323,6 +359,11 @@ class BaseController:
                                                   self.joint_command, self.dt)
         rates = self.model.kinematics.inverse(reading.positions, twist)
         rates, scale = self._saturate(rates, self._max_rates)
+        if self.range_guard is not None:
+            # slow down (direction kept) so that no ranged joint passes its range
+            keep = self.range_guard.scale(reading.positions, rates, twist * scale, self._clock())
+            if keep < 1.0:
+                rates, scale = rates * keep, scale * keep
         try:
             if self.torque is None:
                 self.driver.write_velocities(rates)
@@ -411,6 +452,8 @@ class BaseController:
             try:
                 if kind == "enable":
                     result = self._arm() if arg else self._disarm()
+                elif kind == "unwind":
+                    result = self._start_unwind()
                 else:
                     self.odometry.reset()
                     self.slip_monitor.reset()
@@ -419,6 +462,20 @@ class BaseController:
                 self._on_fault(exc)
                 result = (False, f"driver error: {exc}")
             future.set_result(result)
+
+    def _start_unwind(self) -> tuple[bool, str]:
+        if not self.driver.armed:
+            return False, f"cannot unwind: the motors are {self.state.value} (holonomic-ctl enable)"
+        reading = self.reading
+        maneuver, result = unwind.begin(self.model, None if reading is None else reading.positions,
+                                        self.odometry.pose, self.config.controller.max_velocity[:2],
+                                        self._clock())
+        if maneuver is not None:
+            # the commands before it are not resumed after it
+            self._command = (_ZERO3, self._clock())
+            self._trajectory = None
+            self.maneuver = maneuver
+        return result
 
     def _arm(self) -> tuple[bool, str]:
         if self.driver.armed:
@@ -437,6 +494,7 @@ class BaseController:
         # Start from rest and ignore commands (and trajectories) sent before arming.
         self._command = None
         self._trajectory = None
+        self.cancel_unwind("motors re-armed")
         self.twist_command = np.zeros(3)
         if self.torque is not None:
             self.torque.reset(self.odometry.pose)
@@ -446,6 +504,7 @@ class BaseController:
         self.driver.deactivate()
         self.twist_command = np.zeros(3)
         self._trajectory = None
+        self.cancel_unwind("motors disarmed")
         return True, "motors disarmed"
 
     def _on_fault(self, exc: DriverError) -> None:
@@ -462,6 +521,7 @@ class BaseController:
             self.fault = reason
         self.twist_command = np.zeros(3)
         self._trajectory = None
+        self.cancel_unwind(f"fault: {reason}")
         self.joint_command[:] = 0.0
         try:
             self.driver.deactivate()

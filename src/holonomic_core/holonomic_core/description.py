@@ -166,13 +166,20 @@ def sphere(radius) -> str:
     return f'<sphere radius="{radius:.6g}"/>'
 
 
-def joint_xml(name, kind, parent, child, xyz, axis, effort, velocity) -> str:
+def joint_xml(name, kind, parent, child, xyz, axis, effort, velocity,
+              lower: float | None = None, upper: float | None = None) -> str:
     """A ``<joint>`` at ``xyz`` [m] about/along ``axis``, limits ``effort``
-    [N m] and ``velocity`` [rad/s], no damping or friction."""
+    [N m] and ``velocity`` [rad/s], no damping or friction; a ``continuous``
+    ``kind`` with a range ``lower``/``upper`` [rad] becomes ``revolute``
+    with those limits (a simulator stops the joint there: a hard stop)."""
+    span = ""
+    if lower is not None and upper is not None:
+        kind = "revolute" if kind == "continuous" else kind
+        span = f' lower="{lower:.9g}" upper="{upper:.9g}"'
     return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
             f'<child link="{child}"/><origin xyz="{_xyz(xyz)}" rpy="0 0 0"/>'
-            f'<axis xyz="{_xyz(axis)}"/><limit effort="{effort:.6g}" velocity="{velocity:.6g}"/>'
-            f'<dynamics damping="0" friction="0"/></joint>')
+            f'<axis xyz="{_xyz(axis)}"/><limit{span} effort="{effort:.6g}" '
+            f'velocity="{velocity:.6g}"/><dynamics damping="0" friction="0"/></joint>')
 
 
 def wheel_shapes(radius: float, width: float) -> str:
@@ -205,3 +212,10 @@ def joint_limits(model, joint: str) -> tuple[float, float]:
     """``(max_effort [N m], max_velocity [rad/s])`` of ``joint`` of ``model``."""
     lim = model.joint_limits[model.joint_names.index(joint)]
     return lim.max_effort, lim.max_velocity
+
+
+def joint_range(model, joint: str) -> dict[str, float | None]:
+    """``{"lower": min_position, "upper": max_position}`` [rad] of ``joint``
+    of ``model`` (None, None: continuous), as :func:`joint_xml` takes them."""
+    lim = model.joint_limits[model.joint_names.index(joint)]
+    return {"lower": lim.min_position, "upper": lim.max_position}

@@ -20,10 +20,19 @@ from holonomic_core.kinematics import BaseKinematics
 
 @dataclass(frozen=True)
 class JointLimits:
-    """Limits of one joint: speed [rad/s] and effort [N m]."""
+    """Limits of one joint: speed [rad/s], effort [N m] and position range
+    [rad] (``min_position`` / ``max_position``; None: continuous)."""
 
     max_velocity: float
     max_effort: float
+    min_position: float | None = None
+    max_position: float | None = None
+
+    @property
+    def ranged(self) -> bool:
+        """True when the joint has a position range (a steering joint or
+        turret with cables), False when it is continuous."""
+        return self.min_position is not None
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,9 @@ class ParamSpec:
 
     ``minimum``/``maximum`` bound numbers (and each element of arrays);
     ``exclusive_minimum`` makes the lower bound strict (e.g. a radius > 0).
-    ``default`` of ``None`` means the key is required.
+    ``default`` of ``None`` means the key is required, unless ``optional``:
+    then an absent key validates to None (e.g. a joint range: absent means
+    the joint is continuous).
     """
 
     name: str
@@ -46,6 +48,7 @@ class ParamSpec:
     choices: tuple[str, ...] | None = None
     read_only: bool = True
     min_length: int = 0
+    optional: bool = False
 
     def __post_init__(self):
         if self.type not in _TYPES:
@@ -53,7 +56,7 @@ class ParamSpec:
 
     @property
     def required(self) -> bool:
-        return self.default is None
+        return self.default is None and not self.optional
 
     def allowed(self) -> str:
         """Human-readable statement of the allowed values."""
@@ -78,6 +81,8 @@ class ParamSpec:
     def coerce(self, value: Any) -> Any:
         """Return ``value`` converted to this type or raise :class:`ConfigError`."""
         if value is None:
+            if self.optional:       # written out unset (a recording's config): still unset
+                return None
             raise ConfigError(self.name, value, self.allowed())
         if self.type == "double":
             out = self._number(value, self.name)

@@ -106,6 +106,31 @@ CASES = [
     ("misspelt required key", mutate(r"turret_offset: 0.1641", "turet_offset: 0.1641"),
      "ddrot.turet_offset", "did you mean 'ddrot.turret_offset'? Valid keys of section 'ddrot': "
      "half_wheel_separation, left_wheel_radius, right_wheel_radius, turret_offset, wheel_radius"),
+    # joint ranges (joints.NAME.min_position / max_position)
+    ("joint range with one end only",
+     mutate(r"# min_position: -6.2832 .*", "min_position: -6.2832"),
+     "joints.turret_joint.max_position", "both ends"),
+    ("joint range upside down",
+     mutate(r"# min_position: -6.2832 .*\n(\s*)# max_position: 6.2832 .*",
+            "min_position: 1.0\n\\1max_position: -1.0"),
+     "joints.turret_joint.max_position", "at least min_position + 0.5 rad = 1.5"),
+    ("joint range narrower than 0.5 rad",
+     mutate(r"# min_position: -6.2832 .*\n(\s*)# max_position: 6.2832 .*",
+            "min_position: 0.0\n\\1max_position: 0.2"),
+     "joints.turret_joint.max_position", "at least min_position + 0.5 rad"),
+    ("joint range beyond three turns",
+     mutate(r"# min_position: -6.2832 .*\n(\s*)# max_position: 6.2832 .*",
+            "min_position: -30.0\n\\1max_position: 6.2832"),
+     "joints.turret_joint.min_position", "[-18.8496, 18.8496]"),
+    ("joint range not a number",
+     mutate(r"# min_position: -6.2832 .*\n(\s*)# max_position: 6.2832 .*",
+            "min_position: -6.2832\n\\1max_position: one turn"),
+     "joints.turret_joint.max_position", "a number"),
+    ("joint range on a wheel joint",
+     mutate_xr(r"front_left_wheel_joint: \{max_velocity: 24.0, max_effort: 6.0\}",
+               "front_left_wheel_joint: {max_velocity: 24.0, max_effort: 6.0, "
+               "min_position: -3.0, max_position: 3.0}"),
+     "joints.front_left_wheel_joint.min_position", "continuous"),
     ("misspelt section", mutate(r"^    ddrot:", "    ddrott:"),
      "ddrott.wheel_radius", "did you mean 'ddrot.wheel_radius'? Known sections: "),
 ]
@@ -123,7 +148,7 @@ def test_invalid_yaml_is_rejected_naming_the_key(tmp_path, case, text, key, allo
     assert allowed in str(err.value)
 
 
-@pytest.mark.parametrize("index", [1, 3, 9, 13, 17, 18], ids=lambda i: CASES[i][0])
+@pytest.mark.parametrize("index", [1, 3, 9, 13, 17, 18, 26], ids=lambda i: CASES[i][0])
 def test_bringup_exits_2_with_one_line_naming_the_key(start_bringup, tmp_path, index):
     case, text, key, allowed = CASES[index]
     path = tmp_path / "robot.yaml"

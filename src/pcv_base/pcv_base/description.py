@@ -12,7 +12,7 @@ import math
 from typing import Mapping
 
 from holonomic_core.description import (Description, Inertia, box, inertial, joint_limits,
-                                        joint_xml, robot_xml, shape, visual_and_collision,
+                                        joint_range, joint_xml, robot_xml, shape, visual_and_collision,
                                         wheel_shapes)
 from holonomic_core.schema import ConfigError, ParamSpec
 
@@ -102,7 +102,8 @@ class PoweredCasterDescription(Description):
             effort, velocity = joint_limits(model, caster.steer_joint)
             x, y = caster.axis
             parts.append(joint_xml(caster.steer_joint, "continuous", "base_link", fork,
-                                (x, y, height - h_c / 2), (0, 0, 1), effort, velocity))
+                                (x, y, height - h_c / 2), (0, 0, 1), effort, velocity,
+                                **joint_range(model, caster.steer_joint)))
             parts.append(f'<link name="{wheel}">' + inertial(m_w, Inertia.cylinder_y(m_w, r, w_w))
                          + wheel_shapes(r, w_w) + "</link>")
             effort, velocity = joint_limits(model, caster.wheel_joint)
