@@ -440,8 +440,8 @@ def main(argv: list[str] | None = None) -> int:
                              "teleop,sweep,nav2,straight,spin,creep")
     parser.add_argument("--validate-duration", type=number(0.0, 3600.0, strict_low=True,
                                                           unit="s"),
-                        help="length of the --validate-motion kinds' runs [s] (default: "
-                             "--duration)")
+                        help="length of the runs of the --validate-motion kinds not among "
+                             "--fit-motion [s] (default: --duration)")
     parser.add_argument("--validate-floor", action="append", type=condition_name,
                         metavar="CONDITION",
                         help="record the --validate-motion kinds on these conditions only, "
