@@ -130,6 +130,16 @@ ODOMETRY_EXPERIMENT = [
     (["--self-calibrate", "--duration", "20"], "--self-calibrate needs --duration >= 40 s"),
     (["--calibrate", "--profiles", "{file}/x"], "--profiles: cannot create the folder"),
     (["--recordings", "{file}/x"], "--recordings: cannot create the folder"),
+    (["--validate-motion", "zigzag"], "expected comma-separated kinds of motion among random"),
+    (["--validate-motion", ","], "expected comma-separated kinds of motion"),
+    (["--fit-motion", "spin"], "--fit-motion needs --calibrate"),
+    (["--calibrate", "--fit-motion", "spin,wobble"], "got 'spin,wobble'"),
+    (["--validate-floor", "uneven"], "--validate-floor needs --validate-motion"),
+    (["--validate-duration", "10"], "--validate-duration needs --validate-motion"),
+    (["--validate-motion", "spin", "--validate-duration", "0"],
+     "--validate-duration: expected a number in (0, 3600] s"),
+    (["--condition", "nominal", "--validate-motion", "spin", "--validate-floor", "uneven"],
+     "--validate-floor 'uneven (mu 0.8 +-40 %)' is not among the --condition runs"),
 ]
 
 TORQUE_EXPERIMENT = [

@@ -41,10 +41,10 @@ from holonomic_core.se2 import compose_arc, rotate, wrap_angle
 
 @dataclass(frozen=True)
 class OdometryNoise:
-    """Odometry error model (the defaults: the XR4000's profile for the
-    floors of a robot with calibrated wheel radii, ``holonomic-odometry-experiment
-    --calibrate`` on the drive model, the command in config/xr4000.yaml; see
-    docs/odometry_experiment.md).
+    """Odometry error model (the defaults: the XR4000's profile for its
+    default floor, ``holonomic-odometry-experiment --calibrate`` on the drive
+    model, checked on kinds of motion it was not fitted on, the command in
+    config/xr4000.yaml; see docs/odometry_experiment.md).
 
     Per increment that moves the base by ``dist`` [m] and turns it by
     ``dtheta`` [rad] while the estimator leaves ``rho`` [m/s] of contact
@@ -99,17 +99,17 @@ class OdometryNoise:
     ``twist_lag_gain`` is [-].
     """
 
-    linear_variance_per_meter: float = 0.0
-    angular_variance_per_radian: float = 0.0
-    angular_variance_per_meter: float = 0.0
-    slip_position_gain: float = 0.0
-    slip_heading_gain: float = 0.0
-    twist_variance: tuple[float, float, float] = (1.88e-06, 1.46e-06, 7.61e-06)
-    twist_slip_gain: tuple[float, float, float] = (0.426, 0.388, 7.43)
-    twist_lag_gain: tuple[float, float, float] = (0.599, 0.605, 0.944)
+    linear_variance_per_meter: float = 8.26e-07
+    angular_variance_per_radian: float = 1.57e-06
+    angular_variance_per_meter: float = 2.28e-06
+    slip_position_gain: float = 8.14e-09
+    slip_heading_gain: float = 0.644
+    twist_variance: tuple[float, float, float] = (2.22e-06, 1.89e-06, 1.22e-06)
+    twist_slip_gain: tuple[float, float, float] = (0.378, 0.237, 44.2)
+    twist_lag_gain: tuple[float, float, float] = (0.543, 0.571, 0.684)
     latency_variance: float = 0.0
-    slip4_position_gain: float = 166.0
-    slip4_heading_gain: float = 1010.0
+    slip4_position_gain: float = 1.41e-10
+    slip4_heading_gain: float = 2.56e-06
 
 
 class Odometry:

@@ -102,8 +102,12 @@ class Samples:
         idx = first["index"]
         err = first["pose"] - rec.truth[idx]
         err[:, 2] = [wrap_angle(v) for v in err[:, 2]]
+        motion = getattr(rec, "motion", "random")
         return {"condition": np.array([rec.condition] * len(idx)),
-                "run": np.array([f"{rec.condition} seed {rec.seed}"] * len(idx)), "error": err,
+                "motion": np.array([motion] * len(idx)),
+                "group": np.array([group_label(rec.condition, motion)] * len(idx)),
+                "run": np.array([f"{group_label(rec.condition, motion)} seed {rec.seed}"]
+                                * len(idx)), "error": err,
                 "twist_error": first["twist"] - rec.truth_twist[idx],
                 "bases": {k: b["cov"] for k, b in bases.items()},
                 "slip_basis": slip["twist_var"], "lag_basis": lag["twist_var"]}
@@ -111,6 +115,10 @@ class Samples:
     def _pool(self, parts: list) -> None:
         self._parts = parts
         self.condition = np.concatenate([p["condition"] for p in parts])
+        self.motion = np.concatenate([p["motion"] for p in parts])
+        #: condition, and the kind of motion when it is not random: what
+        #: the fit balances and the tables list
+        self.group = np.concatenate([p["group"] for p in parts])
         self.run = np.concatenate([p["run"] for p in parts])
         self.error = np.concatenate([p["error"] for p in parts])
         self.twist_error = np.concatenate([p["twist_error"] for p in parts])
@@ -119,13 +127,15 @@ class Samples:
         self.slip_basis = np.concatenate([p["slip_basis"] for p in parts])
         self.lag_basis = np.concatenate([p["lag_basis"] for p in parts])
 
-    def subset(self, conditions=None, runs=None) -> "Samples":
+    def subset(self, conditions=None, runs=None, motions=None) -> "Samples":
         """The samples of the runs in ``conditions`` (and in ``runs``, labels
-        of :attr:`run`) only; ``None``: no selection by that key."""
+        of :attr:`run`, and of the kinds of motion in ``motions``) only;
+        ``None``: no selection by that key."""
         out = Samples.__new__(Samples)
         out._pool([p for p in self._parts
                    if (conditions is None or p["condition"][0] in conditions)
-                   and (runs is None or p["run"][0] in runs)])
+                   and (runs is None or p["run"][0] in runs)
+                   and (motions is None or p["motion"][0] in motions)])
         return out
 
     @property
@@ -156,6 +166,12 @@ class Samples:
                 "wz": float(np.mean(tw[:, 2])), "samples": int(mask.sum())}
 
 
+def group_label(condition: str, motion: str) -> str:
+    """A run's group: its condition (floor), and its kind of motion unless
+    that is the experiment's random motion."""
+    return condition if motion == "random" else f"{condition} / {motion}"
+
+
 def mahalanobis2(e: np.ndarray, P: np.ndarray) -> np.ndarray:
     """e^T P^-1 e for (K, 2) errors and (K, 2, 2) covariances (2x2 inverse by hand)."""
     a, b, d = P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]
@@ -164,9 +180,11 @@ def mahalanobis2(e: np.ndarray, P: np.ndarray) -> np.ndarray:
     return (d * x * x - 2.0 * b * x * y + a * y * y) / det
 
 
-def _fit_variances(bases: np.ndarray, err2: np.ndarray, iterations: int = 300) -> np.ndarray:
-    """Maximum-likelihood c >= 0 of var_t = bases[t] @ c for zero-mean errors
-    with squared values ``err2`` (T,), bases (T, m) >= 0.
+def _fit_variances(bases: np.ndarray, err2: np.ndarray, iterations: int = 300,
+                   fixed=0.0) -> np.ndarray:
+    """Maximum-likelihood c >= 0 of var_t = fixed_t + bases[t] @ c for
+    zero-mean errors with squared values ``err2`` (T,), bases (T, m) >= 0,
+    ``fixed`` (T,) >= 0 or a scalar.
 
     Multiplicative fixed point of the likelihood's stationarity condition
     ``sum B_k / v = sum e^2 B_k / v^2`` (both sides positive, so c stays
@@ -177,7 +195,7 @@ def _fit_variances(bases: np.ndarray, err2: np.ndarray, iterations: int = 300) -
     scale = np.maximum(bases.mean(axis=0), 1e-300)
     c = np.full(m, err2.mean() / m) / scale
     for _ in range(iterations):
-        v = np.maximum(bases @ c, 1e-300)
+        v = np.maximum(fixed + bases @ c, 1e-300)
         c = c * ((bases * (err2 / v ** 2)[:, None]).sum(axis=0)
                  / np.maximum((bases / v[:, None]).sum(axis=0), 1e-300))
     return c
@@ -335,6 +353,35 @@ def _held_out_fits(samples: Samples, fit_one) -> np.ndarray | None:
     return out
 
 
+#: the random-walk terms: per metre travelled and per radian turned
+FLOOR_KEYS = ("linear_variance_per_meter", "angular_variance_per_radian",
+              "angular_variance_per_meter")
+#: the share of the fitted samples' mean squared error each random-walk term
+#: explains at least, alone (its floor, the fit's lower bound): see :func:`_floors`
+FLOOR_SHARE = 0.1
+
+
+def _floors(keys, bases: np.ndarray, err2: np.ndarray) -> np.ndarray:
+    """Lower bounds of the coefficients ``keys`` (columns of ``bases``):
+    for the random-walk terms (:data:`FLOOR_KEYS`), :data:`FLOOR_SHARE` of
+    the value at which the term alone explains the samples' mean squared
+    error; 0 for the others.
+
+    Why a floor: no odometry is free of random walk -- every metre and every
+    radian carry tyre contact, floor texture and encoder counts the model
+    does not resolve -- while the slip terms follow the contact residual,
+    which smooth driving (a long straight run, a slow creep, a spin with the
+    wheels in agreement) keeps near zero. A fit left free puts the whole
+    error on the slip terms when the fitting runs' residual tracks it, and
+    then publishes almost no uncertainty on motion that shows no residual.
+    The floor keeps the covariance growing with the distance and the angle
+    on every kind of motion; the slip terms come on top of it.
+    """
+    natural = _natural(bases, err2)
+    return np.array([FLOOR_SHARE * n if k in FLOOR_KEYS else 0.0
+                     for k, n in zip(keys, natural)])
+
+
 #: fewest runs of one floor for the scale to be set on held-out runs
 PREDICTIVE_RUNS = 3
 
@@ -357,30 +404,34 @@ def fit(samples: Samples, start: OdometryNoise, predictive: bool = True) -> Odom
     on every floor, and nearly independent from sample to sample).
     """
     e = samples.error
-    g = samples.condition
+    g = samples.group
     several = len(set(g.tolist())) > 1
     predictive = predictive and not several
-    # heading: P22 = sum_k c_k B_k22
+    # heading: P22 = sum_k c_k B_k22, the random-walk floors (lo) and the
+    # fitted terms on top of them
     h_bases = np.stack([samples.bases[k][:, 2, 2] for k in HEADING_KEYS], axis=1)
-
+    e2 = e[:, 2] ** 2
+    lo = _floors(HEADING_KEYS, h_bases, e2)
+    hfix = h_bases @ lo
     present = _present(h_bases)
-    h = _fit_variances(h_bases, e[:, 2] ** 2) * present
+    h = _fit_variances(h_bases, e2, fixed=hfix) * present
     hvar = _held_out_fits(samples, lambda train: (
-        lambda held, c=_fit_variances(h_bases[train], e[train, 2] ** 2) * present:
+        lambda held, c=_fit_variances(h_bases[train], e2[train], fixed=hfix[train]) * present:
         h_bases[held] @ c)) if predictive else None
     if hvar is None:
         hvar = h_bases @ h
-    s = _scale_to_coverage(lambda f: np.abs(e[:, 2]) <= Z_95 * np.sqrt(f * hvar), g)
+    s = _scale_to_coverage(lambda f: np.abs(e[:, 2]) <= Z_95 * np.sqrt(hfix + f * hvar), g)
     h = h * s
     if several:
-        h = _coverage_search(lambda c: np.abs(e[:, 2]) <= Z_95 * np.sqrt(h_bases @ c), h,
-                             _natural(h_bases, e[:, 2] ** 2), g)
-    noise = replace(start, **dict(zip(HEADING_KEYS, h.tolist())))
-    # position, with the heading's contribution fixed
-    fixed = sum(getattr(noise, k) * samples.bases[k] for k in HEADING_KEYS)[:, :2, :2]
+        h = _coverage_search(lambda c: np.abs(e[:, 2]) <= Z_95 * np.sqrt(hfix + h_bases @ c),
+                             h, _natural(h_bases, e2), g)
+    noise = replace(start, **dict(zip(HEADING_KEYS, (lo + h).tolist())))
+    # position, with the heading's contribution and the position floor fixed
     p_bases = [samples.bases[k][:, :2, :2] for k in POSITION_KEYS]
-
     traces = np.stack([b[:, 0, 0] + b[:, 1, 1] for b in p_bases], axis=1)
+    lo = _floors(POSITION_KEYS, traces, np.sum(e[:, :2] ** 2, axis=1))
+    fixed = (sum(getattr(noise, k) * samples.bases[k] for k in HEADING_KEYS)[:, :2, :2]
+             + sum(li * b for li, b in zip(lo, p_bases)))
     present = _present(traces)
     p = _fit_covariances(fixed, p_bases, e[:, :2]) * present
 
@@ -397,6 +448,7 @@ def fit(samples: Samples, start: OdometryNoise, predictive: bool = True) -> Odom
         p = _coverage_search(lambda c: mahalanobis2(
             e[:, :2], fixed + sum(ci * b for ci, b in zip(c, p_bases))) <= CHI2_2_95, p,
             _natural(traces, np.sum(e[:, :2] ** 2, axis=1)), g)
+    p = lo + p
     noise = replace(noise, **dict(zip(POSITION_KEYS, p.tolist())))
     # twist, per axis j: var_j = tv_j + gs_j rho^2 + gl_j L_j^2
     te = samples.twist_error
@@ -446,13 +498,16 @@ def held_out(samples: Samples, start: OdometryNoise) -> dict:
     return _pooled(per_run)
 
 
-def held_out_by_seed(samples: Samples, start: OdometryNoise, fit_floors=None) -> dict:
+def held_out_by_seed(samples: Samples, start: OdometryNoise, fit_floors=None,
+                     fit_motions=None) -> dict:
     """Leave-one-seed-out coverage of the all-floor profile, per floor.
 
     For each seed, :func:`fit` over the runs of the other seeds on every
-    floor in ``fit_floors`` (None: every floor), checked on that seed's run
-    of each floor (also of the floors it was not fitted on). Returns floor
-    -> the dict of :func:`held_out`.
+    floor in ``fit_floors`` (None: every floor) and of the kinds of motion
+    in ``fit_motions`` (None: every kind), checked on that seed's run of
+    each floor and kind (also of those it was not fitted on). Returns group
+    (floor, and kind of motion: :func:`group_label`) -> the dict of
+    :func:`held_out`.
     """
     seeds = sorted({r.rsplit(" seed ", 1)[1] for r in samples.runs})
     if len(seeds) < 2:
@@ -460,13 +515,25 @@ def held_out_by_seed(samples: Samples, start: OdometryNoise, fit_floors=None) ->
     per_floor: dict = {}
     for seed in seeds:
         noise = fit(samples.subset(fit_floors, runs=[r for r in samples.runs
-                                                     if not r.endswith(f" seed {seed}")]),
-                    start)
+                                                     if not r.endswith(f" seed {seed}")],
+                                   motions=fit_motions), start)
         for run in samples.runs:
             if run.endswith(f" seed {seed}"):
                 one = samples.subset(runs=[run])
-                per_floor.setdefault(one.condition[0], []).append(one.coverage(noise))
+                per_floor.setdefault(one.group[0], []).append(one.coverage(noise))
     return {floor: _pooled(cs) for floor, cs in per_floor.items()}
+
+
+def per_group(samples: Samples, noise: OdometryNoise) -> dict:
+    """Coverage of one ``noise`` per group (floor and kind of motion), run
+    by run and pooled with standard errors over the runs (the dict of
+    :func:`held_out`); a group's runs are held out when ``noise`` was not
+    fitted on them."""
+    out: dict = {}
+    for run in samples.runs:
+        one = samples.subset(runs=[run])
+        out.setdefault(one.group[0], []).append(one.coverage(noise))
+    return {group: _pooled(cs) for group, cs in out.items()}
 
 
 def _pooled(per_run: list) -> dict:
@@ -513,7 +580,7 @@ def band_table(rows: list) -> str:
     """Coverage with its uncertainty, one row per (label, held_out() dict):
     percent, +- the standard error over the runs; '!' marks a fraction
     outside the 90-99.5 % band."""
-    head = (f"{'floor':32s} {'runs':>4s} {'samples':>7s} {'binom':>5s}  "
+    head = (f"{'floor':43s} {'runs':>4s} {'samples':>7s} {'binom':>5s}  "
             + "  ".join(f"{k:>11s}" for k in COMPONENTS))
     lines = [head, "-" * len(head)]
     for label, c in rows:
@@ -522,21 +589,21 @@ def band_table(rows: list) -> str:
             p = c[key]
             flag = " " if BAND[0] <= p <= BAND[1] else "!"
             cells.append(f"{100 * p:5.1f}\u00b1{100 * c[key + '_se_runs']:4.1f}{flag}")
-        lines.append((f"{label:32s} {c['runs']:4d} {c['samples']:7d} "
+        lines.append((f"{label:43s} {c['runs']:4d} {c['samples']:7d} "
                       f"{100 * c['position_se_samples']:4.1f}%  " + "  ".join(cells)).rstrip())
     return "\n".join(lines)
 
 
 def coverage_table(samples: Samples, noise: OdometryNoise) -> str:
     """Coverage per condition and pooled (percent)."""
-    head = (f"{'condition':32s} {'samples':>7s} {'position':>8s} {'heading':>8s} "
+    head = (f"{'condition':43s} {'samples':>7s} {'position':>8s} {'heading':>8s} "
             f"{'vx':>6s} {'vy':>6s} {'wz':>6s}")
     lines = [head, "-" * len(head)]
-    groups = list(dict.fromkeys(samples.condition.tolist())) + ["all"]
+    groups = list(dict.fromkeys(samples.group.tolist())) + ["all"]
     for group in groups:
-        mask = None if group == "all" else samples.condition == group
+        mask = None if group == "all" else samples.group == group
         c = samples.coverage(noise, mask)
-        lines.append(f"{group:32s} {c['samples']:7d} {100 * c['position']:7.1f}% "
+        lines.append(f"{group:43s} {c['samples']:7d} {100 * c['position']:7.1f}% "
                      f"{100 * c['heading']:7.1f}% {100 * c['vx']:5.1f}% {100 * c['vy']:5.1f}% "
                      f"{100 * c['wz']:5.1f}%")
     return "\n".join(lines)
@@ -620,8 +687,8 @@ def plot(samples: Samples, noise, path: str, title: str) -> None:
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
     cover = _coverage(samples, noise)
     for ax, (name, err, sig, k, xlabel, ylabel) in zip(axes, panels):
-        for cond in dict.fromkeys(samples.condition.tolist()):
-            m = samples.condition == cond
+        for cond in dict.fromkeys(samples.group.tolist()):
+            m = samples.group == cond
             ax.scatter(sig[m], np.maximum(err[m], 1e-6), s=2, alpha=0.35, label=cond)
         lo = max(np.percentile(sig, 0.5), 1e-6)
         hi = np.percentile(sig, 99.5) * 1.2
@@ -672,15 +739,18 @@ def _write_profile(path: str, noise: OdometryNoise, twist_window: float, robot: 
 def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = None,
                    per_floor: bool = False, profile_dir: str | None = None,
                    floor_names: dict | None = None, command: str = "",
-                   default_floors=None) -> OdometryNoise:
+                   default_floors=None, fit_motions=None) -> OdometryNoise:
     """Print the coverage of the config's noise and, with ``fit_noise``:
 
     * one profile for all the recorded floors (:func:`fit`; only those in
       ``default_floors`` when given: the floors the config's default is
-      meant for), its coverage and YAML block, and with ``per_floor`` its
-      coverage held out by seed, on every recorded floor;
+      meant for; only the runs of the kinds of motion in ``fit_motions``
+      when given, default: random), its coverage and YAML block, and with
+      ``per_floor`` its coverage held out by seed, on every recorded floor;
+    * the coverage of the config's noise and of that profile on each kind
+      of motion it was not fitted on (held out), per floor;
     * with ``per_floor`` and recordings of several floors (conditions), also
-      one profile per floor, with
+      one profile per floor (fitted on the ``fit_motions`` runs), with
       its held-out coverage (leave one run out) when a floor has >= 2 runs,
       written to ``profile_dir`` as ``ROBOT_FLOOR.yaml`` params overlays
       (``floor_names``: condition -> short name for the file).
@@ -688,12 +758,20 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
     ``plot_path``: error against sigma; with per-floor profiles each floor's
     samples against its own profile's sigma. Returns the all-floors noise.
     """
-    samples = Samples(recordings)
+    everything = Samples(recordings)
+    motions = list(dict.fromkeys(everything.motion.tolist()))
+    fit_motions = [m for m in (fit_motions or ["random"]) if m in motions] or motions
+    held_kinds = [m for m in motions if m not in fit_motions]
+    samples = everything.subset(motions=fit_motions)
     cfg = recordings[0].config.controller
     noise = cfg.noise
     robot = recordings[0].robot
     print(f"\ncoverage of the config's covariance ({robot}, estimator {cfg.estimator}):")
-    print(coverage_table(samples, noise))
+    print(coverage_table(everything, noise))
+    if held_kinds:
+        print(f"\nthe config's covariance on each kind of motion, per run ({robot}; +- standard "
+              "error over the runs, ! outside 90-99.5 %):")
+        print(band_table(list(per_group(everything, noise).items())))
     floors = list(dict.fromkeys(samples.condition.tolist()))
     profiles = {}
     fit_floors = [f for f in floors if default_floors is None or f in default_floors]
@@ -704,16 +782,25 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
         start = noise
         noise = fit(samples.subset(fit_floors), start)
         print(f"\ncalibrated coverage, one profile fitted on {len(fit_floors)} of the "
-              f"{len(floors)} recorded floor(s) ({', '.join(fit_floors)}; one: scaled to 95 %; "
-              "several: each as close to 95 % as one set allows):")
-        print(coverage_table(samples, noise))
+              f"{len(floors)} recorded floor(s) ({', '.join(fit_floors)}; motion: "
+              f"{', '.join(fit_motions)}; one: scaled to 95 %; several: each as close to 95 % "
+              "as one set allows):")
+        print(coverage_table(everything, noise))
         print("\ncalibrated parameters (config file, base_controller: ros__parameters:):")
         print(noise_yaml(noise, cfg.twist_window))
-        if per_floor and len(floors) > 1:
+        if held_kinds:
+            print(f"\nthe calibrated profile on the kinds of motion it was not fitted on "
+                  f"({', '.join(held_kinds)}; fitted on {', '.join(fit_motions)}), per run:")
+            print(band_table(list(per_group(everything.subset(motions=held_kinds),
+                                            noise).items())))
+        if per_floor and (len(floors) > 1 or held_kinds):
             if len({r.rsplit(" seed ", 1)[-1] for r in samples.runs}) >= 2:
                 print("\nthe profile for several floors, held out (each seed's runs against "
-                      "the profile fitted on the other seeds' runs of its floors):")
-                print(band_table(list(held_out_by_seed(samples, start, fit_floors).items())))
+                      "the profile fitted on the other seeds' runs of its floors and kinds of "
+                      "motion, on every floor and kind):")
+                print(band_table(list(held_out_by_seed(everything, start, fit_floors,
+                                                       fit_motions).items())))
+        if per_floor and len(floors) > 1:
             rows = []
             for floor in floors:
                 sub = samples.subset([floor])
@@ -744,7 +831,12 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
                     _write_profile(path, prof, cfg.twist_window, robot, floor, command,
                                    held.get(floor))
                     print(f"written to {path}")
-    if plot_path:
+    if plot_path and held_kinds:
+        plot(everything, noise, plot_path,
+             f"{robot}: odometry error against the published sigma, fitted on "
+             f"{', '.join(fit_motions)} ({len(recordings)} runs)")
+        print(f"plot written to {plot_path}")
+    elif plot_path:
         plot(samples, profiles or noise, plot_path,
              f"{robot}: odometry error against the published sigma ({len(recordings)} runs"
              + (", each floor's own profile)" if profiles else ")"))

@@ -58,6 +58,7 @@ from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, o
                                          robot_config)
 from holonomic_core.schema import ConfigError, parse_overrides
 from holonomic_sim.contact_forces import internal_force
+from holonomic_sim.motion_kinds import MOTION_KINDS, MotionPlan, motion_list
 
 _IDEAL = {"sim.ideal_motors": True}
 _DRIVES = {"sim.ideal_motors": False}
@@ -115,6 +116,7 @@ class Trial:
     seconds: float = 0.0                 # [s] wall time of the simulation
     internal_force_rms: float = 0.0      # [N] RMS of |f_int| over the run
     fault: str | None = None             # the controller's fault, if it stopped the run
+    motion: str = "random"               # the kind of motion (holonomic_sim.motion_kinds)
 
 
 @dataclass
@@ -128,7 +130,8 @@ class Recording:
     (N,) [N] the magnitude of the wheels' internal force
     (:mod:`holonomic_sim.contact_forces`); ``fault`` the controller's fault if
     it stopped the run; ``hidden_truth`` the simulator's hidden geometry
-    (``SimDriver.hidden_truth``).
+    (``SimDriver.hidden_truth``); ``motion`` how the base was driven (a kind
+    of :mod:`holonomic_sim.motion_kinds`).
     """
 
     robot: str
@@ -143,6 +146,7 @@ class Recording:
     internal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
     fault: str | None = None
     hidden_truth: dict = field(default_factory=dict)
+    motion: str = "random"
 
 
 def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, float, float]:
@@ -172,13 +176,15 @@ def run_overrides(seed: int, speed: float, acceleration: float,
 def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
              speed: float = 1.25, acceleration: float = 2.0, overrides: dict | None = None,
              calibration: dict | None = None, condition: str = "",
-             finish=(0.0, 0.0, 0.0)) -> Recording:
+             finish=(0.0, 0.0, 0.0), motion: str = "random") -> Recording:
     """Random moves inside ``area`` [m] for ``duration`` [s] (targets drawn
     from ``seed``), then to ``finish`` (x, y, yaw in odom [m, m, rad];
-    default back to the start), recorded (see the module
-    docstring). ``overrides``: config keys (a slip condition, simulator
-    faults, the drive model); ``calibration``: a calibration overlay for the
-    controller. The simulated robot is built as holonomic-bringup builds it
+    default back to the start), recorded (see the module docstring); another
+    kind of ``motion`` (:mod:`holonomic_sim.motion_kinds`) drives its
+    open-loop schedule for ``duration`` instead, then stops where it is.
+    ``overrides``: config keys (a slip condition, simulator faults, the drive
+    model); ``calibration``: a calibration overlay for the controller. The
+    simulated robot is built as holonomic-bringup builds it
     (:func:`holonomic_core.nominal.driver_for`): from the robot's config
     file's geometry and the ``sim.*`` errors, so neither the overlay nor a
     geometry key among ``overrides`` changes it (they are the controller's
@@ -207,9 +213,12 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
             internal.append(float(np.linalg.norm(internal_force(positions, forces))))
 
         step()
+        if motion != "random":
+            _drive_open_loop(ctrl, step, clock,
+                             MotionPlan(motion, seed, duration, speed, wz_max), duration)
         half = np.array(area) / 2.0
         target, target_since = None, 0.0
-        while clock.now < duration:
+        while motion == "random" and clock.now < duration:
             pose = truths[-1]
             reached = target is not None and math.hypot(*(target[:2] - pose[:2])) < 0.05
             if target is None or reached or clock.now - target_since > 4.0:
@@ -220,7 +229,7 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
             step()
         home = np.array(finish, float)
         deadline = clock.now + 15.0
-        while clock.now < deadline:
+        while motion == "random" and clock.now < deadline:
             pose = truths[-1]
             if (math.hypot(*(pose[:2] - home[:2])) < 0.01
                     and abs(wrap_angle(pose[2] - home[2])) < 0.02):
@@ -235,27 +244,43 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
     return Recording(robot, condition, seed, cfg, np.array(stamps), np.array(readings),
                      np.array(truths), np.array(twists), seconds=time.perf_counter() - t_wall,
                      internal_force=np.array(internal),
-                     fault=None if fault is None else str(fault), hidden_truth=hidden)
+                     fault=None if fault is None else str(fault), hidden_truth=hidden,
+                     motion=motion)
+
+
+def _drive_open_loop(ctrl, step, clock, plan: MotionPlan, duration: float) -> None:
+    """Command ``plan``'s twist every cycle for ``duration`` [s] (``step``:
+    one recorded control cycle)."""
+    start = clock.now
+    while clock.now - start < duration:
+        ctrl.set_command(plan.twist_at(clock.now - start))
+        step()
 
 
 def record_run(robot: str, condition: str, seed: int, duration: float = 60.0,
                area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0,
-               overrides: dict | None = None, calibration: dict | None = None) -> Recording:
-    """One random run and return under a slip ``condition`` (a key of
-    CONDITIONS), recorded; ``overrides`` / ``calibration`` as in
-    :func:`simulate`, applied over the condition's settings."""
+               overrides: dict | None = None, calibration: dict | None = None,
+               motion: str = "random") -> Recording:
+    """One run of ``motion`` (default: random moves and the return) under a
+    slip ``condition`` (a key of CONDITIONS), recorded; ``overrides`` /
+    ``calibration`` as in :func:`simulate`, applied over the condition's
+    settings."""
     return simulate(robot, seed, duration, area, speed, acceleration,
-                    {**CONDITIONS[condition], **(overrides or {})}, calibration, condition)
+                    {**CONDITIONS[condition], **(overrides or {})}, calibration, condition,
+                    motion)
 
 
 def recording_path(folder: str, robot: str, condition: str, seed: int, duration: float,
-                   speed: float, acceleration: float, overrides: dict | None = None) -> str:
+                   speed: float, acceleration: float, overrides: dict | None = None,
+                   motion: str = "random") -> str:
     """Where ``--recordings FOLDER`` keeps one run: the file name holds every
     argument that changes the simulation (robot, condition, seed, duration,
-    limits, the ``-p`` overrides), so a cached run is only reused for the
-    same run."""
+    limits, the ``-p`` overrides, the kind of motion but random's), so a
+    cached run is only reused for the same run."""
     extra = "".join(f"_{k}={v}" for k, v in sorted((overrides or {}).items()))
-    name = (f"{os.path.splitext(os.path.basename(robot))[0]}_{PROFILE_NAMES[condition]}_seed{seed}"
+    kind = "" if motion == "random" else f"_{motion}"
+    name = (f"{os.path.splitext(os.path.basename(robot))[0]}_{PROFILE_NAMES[condition]}{kind}"
+            f"_seed{seed}"
             f"_{duration:g}s_{speed:g}mps_{acceleration:g}mps2{extra}.npz")
     return os.path.join(folder, name.replace(os.sep, "_"))
 
@@ -270,15 +295,17 @@ def save_recording(rec: Recording, path: str) -> None:
     os.replace(tmp, path)
 
 
-def load_recording(path: str, robot: str, condition: str, seed: int, config) -> Recording:
+def load_recording(path: str, robot: str, condition: str, seed: int, config,
+                   motion: str = "random") -> Recording:
     """A recording written by :func:`save_recording`; ``config``: the robot
-    config the run was made with (not stored: it is re-loaded)."""
+    config the run was made with (not stored: it is re-loaded); ``motion``:
+    its kind of motion (in its file name)."""
     with np.load(path, allow_pickle=False) as data:
         return Recording(robot, condition, seed, config, data["stamps"], data["positions"],
                          data["truth"], data["truth_twist"], seconds=float(data["seconds"]),
                          internal_force=data["internal_force"],
                          fault=str(data["fault"]) or None,
-                         hidden_truth=json.loads(str(data["hidden_truth"])))
+                         hidden_truth=json.loads(str(data["hidden_truth"])), motion=motion)
 
 
 #: shortest --duration [s] with --self-calibrate: the first half of a run
@@ -316,7 +343,7 @@ def final_errors(rec: Recording) -> Trial:
                   seconds=rec.seconds,
                   internal_force_rms=float(np.sqrt(np.mean(np.square(rec.internal_force))))
                   if rec.internal_force.size else 0.0,
-                  fault=rec.fault)
+                  fault=rec.fault, motion=rec.motion)
     for estimator in ESTIMATORS:
         odo = Odometry(cfg.model, estimator, cfg.controller.noise, cfg.controller.twist_window)
         for stamp, positions in zip(rec.stamps.tolist(), rec.positions):
@@ -339,8 +366,12 @@ def summarize(trials: list[Trial]) -> str:
     head = (f"{'condition':30s} {'estimator':9s} {'mean err':>9s} {'median':>8s} "
             f"{'mean hdg':>9s} {'mean/pinv':>9s} {'median/pinv':>11s} {'< pinv':>7s}")
     lines += [head, "-" * len(head)]
-    for condition in dict.fromkeys(t.condition for t in trials):
-        group = [t for t in trials if t.condition == condition]
+
+    def label(t):
+        return t.condition if t.motion == "random" else f"{t.condition} / {t.motion}"
+
+    for condition in dict.fromkeys(label(t) for t in trials):
+        group = [t for t in trials if label(t) == condition]
         pos = {e: np.array([t.position_error[e] for t in group]) for e in ESTIMATORS}
         hdg = {e: np.array([t.heading_error[e] for t in group]) for e in ESTIMATORS}
         for e in ESTIMATORS:
@@ -403,6 +434,24 @@ def main(argv: list[str] | None = None) -> int:
                              "half of that run against ground truth, as holonomic-calibrate "
                              "does: the covariance of a robot whose geometry is calibrated "
                              "(worn tyres after calibration)")
+    parser.add_argument("--fit-motion", type=motion_list, default=None,
+                        metavar="KIND[,KIND...]",
+                        help="with --calibrate: the kinds of motion the covariance is fitted "
+                             f"on, comma-separated among {', '.join(MOTION_KINDS)} (or all; "
+                             "default: random); each is recorded on every --condition")
+    parser.add_argument("--validate-motion", type=motion_list, default=[],
+                        metavar="KIND[,KIND...]",
+                        help="kinds of motion also recorded, to check the covariance on "
+                             "(held out when not among --fit-motion), e.g. "
+                             "teleop,sweep,nav2,straight,spin,creep")
+    parser.add_argument("--validate-duration", type=number(0.0, 3600.0, strict_low=True,
+                                                          unit="s"),
+                        help="length of the runs of the --validate-motion kinds not among "
+                             "--fit-motion [s] (default: --duration)")
+    parser.add_argument("--validate-floor", action="append", type=condition_name,
+                        metavar="CONDITION",
+                        help="record the --validate-motion kinds on these conditions only, "
+                             "repeatable (default: every --condition)")
     parser.add_argument("--check", action="store_true",
                         help="print the coverage of the config's own covariance parameters")
     parser.add_argument("--plot", type=output_file, metavar="PNG",
@@ -423,9 +472,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.self_calibrate and args.duration < SELF_CALIBRATION_DURATION:
         parser.error(f"--self-calibrate needs --duration >= {SELF_CALIBRATION_DURATION:g} s "
                      "(the calibration wants 20 s of driving in each run's first half)")
-    missing = set(args.default_floor or ()) - set(args.condition or CONDITIONS)
-    if missing:
-        parser.error(f"--default-floor {sorted(missing)[0]!r} is not among the --condition runs")
+    for option, floors in (("--default-floor", args.default_floor),
+                           ("--validate-floor", args.validate_floor)):
+        missing = set(floors or ()) - set(args.condition or CONDITIONS)
+        if missing:
+            parser.error(f"{option} {sorted(missing)[0]!r} is not among the --condition runs")
+    for option, value in (("--validate-floor", args.validate_floor),
+                          ("--validate-duration", args.validate_duration)):
+        if value and not args.validate_motion:
+            parser.error(f"{option} needs --validate-motion")
+    if args.fit_motion and not args.calibrate:
+        parser.error("--fit-motion needs --calibrate")
+    fit_motions = args.fit_motion or ["random"]
     for option, folder in (("--profiles", args.profiles), ("--recordings", args.recordings)):
         try:    # before the runs, not after them
             if folder:
@@ -437,28 +495,35 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         parser.error(str(exc))
     trials, recordings = [], []
-    for condition in args.condition or list(CONDITIONS):
+    runs = [(condition, motion) for condition in args.condition or list(CONDITIONS)
+            for motion in dict.fromkeys(fit_motions + args.validate_motion)
+            if motion in fit_motions or args.validate_floor is None
+            or condition in args.validate_floor]
+    for condition, motion in runs:
+        duration = (args.duration if motion in fit_motions or not args.validate_duration
+                    else args.validate_duration)
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             try:
                 drives = not CONDITIONS[condition]["sim.ideal_motors"]
                 extra = drive_overrides if drives else None
                 cached = args.recordings and recording_path(
-                    args.recordings, args.robot, condition, seed, args.duration, args.speed,
-                    args.acceleration, extra)
+                    args.recordings, args.robot, condition, seed, duration, args.speed,
+                    args.acceleration, extra, motion)
                 rec = None
                 overrides = run_overrides(seed, args.speed, args.acceleration,
                                           {**CONDITIONS[condition], **(extra or {})})
                 if cached and os.path.exists(cached):
                     config = load_config(args.robot, overrides)
                     try:
-                        rec = load_recording(cached, args.robot, condition, seed, config)
+                        rec = load_recording(cached, args.robot, condition, seed, config,
+                                             motion)
                     except (OSError, ValueError, KeyError) as exc:
                         print(f"{cached}: unreadable ({exc}), simulating the run again",
                               file=sys.stderr)
                 if rec is None:
-                    rec = record_run(args.robot, condition, seed, args.duration,
+                    rec = record_run(args.robot, condition, seed, duration,
                                      speed=args.speed, acceleration=args.acceleration,
-                                     overrides=extra)
+                                     overrides=extra, motion=motion)
                     if cached:
                         save_recording(rec, cached)
             except ConfigError as exc:      # e.g. per-wheel radii on a DDROT
@@ -478,7 +543,8 @@ def main(argv: list[str] | None = None) -> int:
             if args.calibrate or args.check:
                 recordings.append(rec)
             errs = "  ".join(f"{e} {trial.position_error[e] * 1000:6.1f}mm" for e in ESTIMATORS)
-            print(f"{condition:30s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
+            label = condition if motion == "random" else f"{condition} / {motion}"
+            print(f"{label:41s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
                   f"({trial.seconds:.1f} s){note}"
                   f"{'  FAULT: ' + trial.fault if trial.fault else ''}",
                   file=sys.stderr, flush=True)
@@ -494,7 +560,7 @@ def main(argv: list[str] | None = None) -> int:
         from holonomic_sim.odometry_calibration import calibrate_main
         calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot,
                        per_floor=True, profile_dir=args.profiles, floor_names=PROFILE_NAMES,
-                       default_floors=args.default_floor,
+                       default_floors=args.default_floor, fit_motions=fit_motions,
                        command=" ".join(["holonomic-odometry-experiment",
                                          *(argv if argv is not None else sys.argv[1:])]))
     return 0

@@ -86,6 +86,8 @@ def _one_floor(k_per_run, samples_per_run=10):
         bases["linear_variance_per_meter"][:, 1, 1] = t
         error = np.column_stack([k * np.sqrt(t), np.zeros_like(t), k * np.sqrt(t)])
         parts.append({"condition": np.array(["floor"] * len(t)),
+                      "motion": np.array(["random"] * len(t)),
+                      "group": np.array(["floor"] * len(t)),
                       "run": np.array([f"floor seed {r}"] * len(t)), "error": error,
                       "twist_error": np.full((len(t), 3), 0.01), "bases": bases,
                       "slip_basis": np.zeros((len(t), 3)), "lag_basis": np.zeros((len(t), 3))})
@@ -94,14 +96,18 @@ def _one_floor(k_per_run, samples_per_run=10):
     return samples
 
 
-def test_a_floor_profile_is_scaled_for_the_next_run_not_the_runs_it_saw():
+def test_a_floor_profile_is_scaled_for_the_next_run_not_the_runs_it_saw(monkeypatch):
     # four runs, error sizes k = 1, 1, 1, 2 (one seed's wheels slip more).
     # The likelihood fit of a variance c t to errors k sqrt(t) is c = mean(k^2):
     # 7/4 over all runs; the position's c t I to (k sqrt(t), 0): mean(k^2) / 2.
     # Every sample of a run has the same |e| / sigma, so 95 % of 4 equal runs
     # needs all 4 inside: heading k^2 <= 1.96^2 c, position k^2 <= 5.991 c.
+    from holonomic_sim import odometry_calibration
     from holonomic_sim.odometry_calibration import fit
     from holonomic_core.odometry import OdometryNoise
+    # the scale alone: no random-walk floor under the fitted terms (the
+    # floor has its own test below)
+    monkeypatch.setattr(odometry_calibration, "FLOOR_SHARE", 0.0)
     samples = _one_floor([1.0, 1.0, 1.0, 2.0])
     start = OdometryNoise()
     seen = fit(samples, start, predictive=False)
@@ -150,7 +156,8 @@ def _two_floors(with_rho4_basis):
             bases["slip4_heading_gain"][:, 2, 2] = rho ** 4 * t
             bases["slip4_position_gain"][:, 0, 0] = rho ** 4 * t
             bases["slip4_position_gain"][:, 1, 1] = rho ** 4 * t
-        parts.append({"condition": np.array([floor] * n), "run": np.array([f"{floor} seed 0"] * n),
+        parts.append({"condition": np.array([floor] * n), "motion": np.array(["random"] * n),
+                      "group": np.array([floor] * n), "run": np.array([f"{floor} seed 0"] * n),
                       "error": error, "twist_error": np.full((n, 3), 0.01), "bases": bases,
                       "slip_basis": np.zeros((n, 3)), "lag_basis": np.zeros((n, 3))})
     samples = Samples.__new__(Samples)
@@ -180,3 +187,29 @@ def test_the_rho4_terms_let_one_profile_cover_floors_whose_slip_differs():
             assert 40.0 < noise.slip4_heading_gain < 60.0, noise
             assert 40.0 < noise.slip4_position_gain < 60.0, noise
             assert noise.slip_heading_gain < 0.01 and noise.slip_position_gain < 0.01, noise
+
+
+def test_the_random_walk_floors_never_go_to_zero_when_slip_explains_the_errors():
+    # errors that grow with rho^4 only (_two_floors), with distance and
+    # rotation bases present too (t, as if the base moved 1 m and turned
+    # 1 rad per sample): a free fit would put everything on the rho^4 terms
+    # and publish no variance on motion without residual. The floor is
+    # FLOOR_SHARE of the value at which the term alone explains the mean
+    # squared error: mean(e^2) / mean(t), per column
+    from holonomic_core.odometry import OdometryNoise
+    from holonomic_sim.odometry_calibration import FLOOR_SHARE, fit
+    samples = _two_floors(True)
+    t = np.tile(np.arange(1.0, 401.0), 2)
+    samples.bases["angular_variance_per_radian"][:, 2, 2] = t
+    samples.bases["angular_variance_per_meter"][:, 2, 2] = t
+    samples.bases["linear_variance_per_meter"][:, 0, 0] = t
+    samples.bases["linear_variance_per_meter"][:, 1, 1] = t
+    noise = fit(samples, OdometryNoise())
+    e = samples.error
+    heading_natural = np.mean(e[:, 2] ** 2) / np.mean(t)
+    position_natural = np.mean(np.sum(e[:, :2] ** 2, axis=1)) / np.mean(2.0 * t)
+    assert FLOOR_SHARE > 0.0
+    for value in (noise.angular_variance_per_radian, noise.angular_variance_per_meter):
+        assert value >= FLOOR_SHARE * heading_natural * (1.0 - 1e-9) > 0.0, noise
+    assert noise.linear_variance_per_meter >= (
+        FLOOR_SHARE * position_natural * (1.0 - 1e-9)) > 0.0, noise

@@ -1,8 +1,8 @@
 """The published odometry covariance against simulated ground truth (short runs).
 
 A covariance profile holds on the floors it was calibrated on: the XR4000's
-default on an ordinary and on a slippery floor (a powered-caster vehicle sees
-slip in its contact residual), the HAMR's slippery profile
+default (fitted on the default floor) on an ordinary floor and its slippery
+profile on a slippery one, the HAMR's slippery profile
 (``config/odometry/hamr_slippery.yaml``) on the slippery floor (a DDROT sees
 none). One drive each, 15 s, on the drive model (the simulator's default),
 seed 20: not one of the calibration's seeds (0-11), so a drive the profile has
@@ -46,10 +46,14 @@ def hamr_slippery():
     return _drive("hamr", "drives, slippery (mu 0.3 +-30 %)", **HAMR_LIMITS)
 
 
-def _hamr_slippery_profile():
-    overlay = read_params_file(PROFILES / "hamr_slippery.yaml")
+def _profile(robot, name):
+    overlay = read_params_file(PROFILES / name)
     assert set(overlay) and all(k.startswith("odometry.") for k in overlay), overlay
-    return load_config("hamr", overlay).controller.noise
+    return load_config(robot, overlay).controller.noise
+
+
+def _hamr_slippery_profile():
+    return _profile("hamr", "hamr_slippery.yaml")
 
 
 def _median_error_over_sigma(s, noise):
@@ -60,29 +64,30 @@ def _median_error_over_sigma(s, noise):
 def test_xr4000_defaults_cover_an_ordinary_floor(xr4000_uneven):
     rec, s = xr4000_uneven
     cover = s.coverage(rec.config.controller.noise)
-    # measured on this drive: position 100 %, heading 100 %, vx 97.1 %,
-    # vy 94.8 %, wz 95.4 % (the calibration's uneven runs, held out by seed:
-    # 98.4 / 98.8 / 95.8 / 95.6 / 96.4 %; one short drive's pose fraction
-    # spreads by +-13 % even for an exact covariance, random_walk_spread)
+    # measured on this drive: position 74.7 %, heading 100 %, vx 97.7 %,
+    # vy 94.8 % (the defaults are the default floor's; over the 8 uneven runs
+    # of docs/odometry_experiment.md 93.8 / 99.6 %). One short drive's pose
+    # fraction spreads by +-13 % even for an exact covariance
+    # (random_walk_spread): the bound is two of those spreads below 95 %
     for key in ("position", "heading", "vx", "vy", "wz"):
-        assert 0.8 <= cover[key] <= 1.0, (key, cover)
+        assert 0.69 <= cover[key] <= 1.0, (key, cover)
     # |error| / sigma for errors that match the covariance is chi-distributed
     # with 2 degrees of freedom: median 1.18. The pre-calibration model's
     # sigma was 60-80x the error (median ~0.015). Measured 0.32 on this drive
     assert 0.2 < _median_error_over_sigma(s, rec.config.controller.noise) < 3.0
 
 
-def test_xr4000_defaults_cover_a_slippery_floor_too(xr4000_slippery):
-    # the same default on mu 0.3: the contact residual grows (its fourth
-    # power carries the covariance), so the sigma grows with the errors.
-    # Measured on this drive: position 100 %, heading 100 %, median |e| /
-    # sigma 0.57 (held out by seed over the calibration's slippery runs:
-    # 94.2 / 93.5 %). Contrast the HAMR below: its defaults cover 5 %
+def test_xr4000_on_a_slippery_floor_is_covered_by_the_profile_of_that_floor(xr4000_slippery):
+    # the defaults are the default floor's (mu 1.0); on mu 0.3 the slippery
+    # floor's profile (config/odometry/xr4000_slippery.yaml, its rho^4 terms
+    # follow the grown residual) covers it. The defaults there: 37.3 %
+    # position over the 8 slippery runs of docs/odometry_experiment.md
     rec, s = xr4000_slippery
-    cover = s.coverage(rec.config.controller.noise)
+    profile = _profile("xr4000", "xr4000_slippery.yaml")
+    cover = s.coverage(profile)
     for key in ("position", "heading", "vx", "vy", "wz"):
         assert 0.69 <= cover[key] <= 1.0, (key, cover)
-    assert 0.2 < _median_error_over_sigma(s, rec.config.controller.noise) < 3.0
+    assert 0.2 < _median_error_over_sigma(s, profile) < 3.0
 
 
 def test_a_ddrot_cannot_see_slip_its_residual_is_zero(hamr_slippery):
