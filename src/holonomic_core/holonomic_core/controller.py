@@ -286,7 +286,9 @@ class BaseController:
             pull = TRAJECTORY_GAIN * relative_pose(self.odometry.pose, sample[0])
             target = np.asarray(sample[1], float) + pull
         twist = self.limiter.limit(target, self.twist_command, self.dt)
-        rates = self.model.kinematics.inverse(reading.positions, twist)
+        # the twist's rate since the last cycle feeds a steered wheel's turn forward
+        rates = self.model.kinematics.command(reading.positions, twist,
+                                              (twist - self.twist_command) / self.dt)
         rates, scale = self._saturate(rates, self._max_rates)
         try:
             if self.torque is None:
