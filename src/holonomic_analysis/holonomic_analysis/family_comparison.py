@@ -11,7 +11,7 @@ base whose wheels must turn first (a swerve module across the motion, a
 powered caster swinging round) pays that here; a swerve reversing along
 its modules flips its wheels instead.
 
-    python -m holonomic_analysis.family_comparison hamr xr4000 swerve4 [--driver sim]
+    python -m holonomic_analysis.family_comparison hamr xr4000 swerve4 [--driver sim] [-p K:=V]
 """
 
 from __future__ import annotations
@@ -26,17 +26,19 @@ from holonomic_analysis.holonomicity import measure
 from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
-from holonomic_core.schema import ConfigError
+from holonomic_core.schema import ConfigError, parse_overrides
 
 #: seconds of steady running before the reversal, and the reversal's timeout
 RUN_UP, TIMEOUT = 2.0, 10.0
 
 
-def reversal_time(robot: str, speed: float, alpha: float = 0.0, driver: str = "mock") -> float:
+def reversal_time(robot: str, speed: float, alpha: float = 0.0, driver: str = "mock",
+                  overrides=None) -> float:
     """Seconds [s] from the reversal command until the base moves at 90 %
     of ``speed`` [m/s] the other way along base_link direction ``alpha``
-    [rad] (inf when it does not within TIMEOUT)."""
-    cfg = load_config(robot, {"driver": driver, "cmd_timeout": 0.0, "enable_on_start": True})
+    [rad] (inf when it does not within TIMEOUT); ``overrides``: flat config keys."""
+    cfg = load_config(robot, {**(overrides or {}), "driver": driver, "cmd_timeout": 0.0,
+                              "enable_on_start": True})
     c = cfg.controller
     clock = ManualClock()
     args = (cfg.model, cfg.values, c.control_rate)
@@ -76,17 +78,18 @@ def reversal_time(robot: str, speed: float, alpha: float = 0.0, driver: str = "m
     return math.inf
 
 
-def compare(robots, speed: float, driver: str) -> list[dict]:
+def compare(robots, speed: float, driver: str, overrides=None) -> list[dict]:
     """Per robot: H over 8 directions at d_T = 1 m (theta_T = 0), and the
     reversal times along base_link x and y."""
     rows = []
     for robot in robots:
-        h = measure(robot, 1.0, 8, (0.0,), driver)
+        h = measure(robot, 1.0, 8, (0.0,), driver, overrides)
         rows.append({"robot": h.robot, "H": h.H,
                      "t_min": min(m.seconds for m in h.moves),
                      "t_max": max(m.seconds for m in h.moves),
-                     "reverse_x": reversal_time(robot, speed, 0.0, driver),
-                     "reverse_y": reversal_time(robot, speed, math.pi / 2, driver)})
+                     "reverse_x": reversal_time(robot, speed, 0.0, driver, overrides),
+                     "reverse_y": reversal_time(robot, speed, math.pi / 2, driver,
+                                                overrides)})
     return rows
 
 
@@ -99,12 +102,20 @@ def main(argv=None) -> int:
                         help="plant: mock (ideal joints) or sim (pybullet, drive model)")
     parser.add_argument("--speed", type=float, default=0.5,
                         help="reversal speed [m/s], in (0, 5] (default 0.5)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override a config parameter of every robot, e.g. "
+                             "-p sim.ideal_motors:=true")
     args = parser.parse_args(argv)
+    try:
+        overrides = parse_overrides(args.param)
+    except ValueError as exc:
+        print(f"-p: {exc}", file=sys.stderr)
+        return 2
     if not (0.0 < args.speed <= 5.0):
         print(f"--speed: must be in (0, 5] m/s, got {args.speed:g}", file=sys.stderr)
         return 2
     try:
-        rows = compare(args.robots, args.speed, args.driver)
+        rows = compare(args.robots, args.speed, args.driver, overrides)
     except (ConfigError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
