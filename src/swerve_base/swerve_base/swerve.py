@@ -39,7 +39,7 @@ import numpy as np
 from holonomic_core.kinematics import BaseKinematics
 from holonomic_core.schema import ConfigError, ParamSpec, number_or_none
 from swerve_base import odometry_fit
-from swerve_base.steering_law import choose_heading, module_command
+from swerve_base.steering_law import module_command
 
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 #: two steering axes closer than this [m] count as coincident
@@ -162,17 +162,6 @@ class SwerveKinematics(BaseKinematics):
         """Velocity (n x 2) [m/s] the twist (vx, vy, wz) gives each steering axis."""
         vx, vy, wz = (float(v) for v in twist)
         return np.column_stack((vx - wz * self.sy, vy + wz * self.sx))
-
-    def target_headings(self, positions, twist) -> tuple[np.ndarray, np.ndarray]:
-        """Per module the heading [rad] of least travel from the measured one
-        that points along its velocity, and the wheel's sign (+1 / -1
-        reversed); a module below ``hold_speed`` keeps its heading (+1)."""
-        q = np.asarray(positions, float)
-        heading, sign = q[0::2].copy(), np.ones(len(self.modules))
-        for i, (v, rng) in enumerate(zip(self.module_velocities(twist), self.steering_ranges)):
-            if math.hypot(v[0], v[1]) >= self.hold_speed:
-                heading[i], sign[i] = choose_heading(math.atan2(v[1], v[0]), heading[i], rng)
-        return heading, sign
 
     def command(self, positions: np.ndarray, twist: np.ndarray,
                 twist_rate: np.ndarray | None = None) -> np.ndarray:

@@ -3,7 +3,6 @@ recovered from ordinary driving (the least-squares odometry's residual),
 on samples synthesised from a robot whose true parameters differ from the
 configured ones."""
 
-import math
 
 import numpy as np
 import pytest
