@@ -225,3 +225,25 @@ def test_the_controller_drives_a_mock_swerve_sideways_after_turning_its_modules(
     assert np.abs(np.abs(steer) - math.pi / 2) == pytest.approx([0.0] * 4, abs=1e-3)
     assert np.abs(ctrl.joint_command[1::2]) == pytest.approx([0.5 / R] * 4, rel=1e-3)
     assert ctrl.odometry.twist == pytest.approx([0.0, 0.5, 0.0], abs=1e-3)
+
+
+def test_the_kinematics_keep_each_module_inside_its_steering_range():
+    # two modules; a's steering limited to (-pi/2, pi/2 + 0.1). At phi = 80 deg
+    # a twist (cos 120, sin 120) deg at 1 m/s: a may not turn to 120 deg (40 deg
+    # away) and reverses to -60 deg (140 deg away): steering 8 * (-140 deg)
+    # = -19.548 rad/s, wheel -cos(140 deg) clipped to 0; b (no range) turns
+    # +40 deg: 8 * 0.6981 = 5.585 rad/s, wheel cos 40 / r = 10.214 rad/s
+    modules = [Module("a", 0.2, 0.0, R), Module("b", -0.2, 0.0, R)]
+    kin = SwerveKinematics(modules, steering_ranges=[(-math.pi / 2, math.pi / 2 + 0.1), None])
+    phi = math.radians(80)
+    t = math.radians(120)
+    rates = kin.inverse(np.array([phi, 0.0, phi, 0.0]), np.array([math.cos(t), math.sin(t), 0.0]))
+    assert rates == pytest.approx([8.0 * math.radians(-140), 0.0,
+                                   8.0 * math.radians(40), math.cos(math.radians(40)) / R])
+
+
+def test_a_steering_range_narrower_than_pi_is_refused_naming_the_joint():
+    modules = [Module("a", 0.2, 0.0, R), Module("b", -0.2, 0.0, R)]
+    with pytest.raises(ConfigError) as err:
+        SwerveKinematics(modules, steering_ranges=[None, (-1.0, 1.0)])
+    assert "'joints.b_steer_joint.max_position'" in str(err.value)
