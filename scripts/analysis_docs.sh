@@ -40,3 +40,9 @@ run holonomic-analyze comr3 --measure --kinematic
 run holonomic-analyze hamr --measure -p sim.ideal_motors:=true --heading-changes 0,1.570796,-1.570796,3.141593 --plot "$OUT"
 run holonomic-analyze xr4000 --measure -p sim.ideal_motors:=true --heading-changes 0,1.570796,-1.570796,3.141593 --plot "$OUT"
 run holonomic-analyze comr3 --measure -p sim.ideal_motors:=true --heading-changes 0,1.570796,-1.570796,3.141593 --plot "$OUT"
+# the three families side by side: H and the time to reverse at speed
+run python -m holonomic_analysis.family_comparison hamr xr4000 swerve4 --driver sim -p sim.ideal_motors:=true
+run python -m holonomic_analysis.family_comparison hamr xr4000 swerve4 --driver sim -p sim.ideal_motors:=true \
+    -p limits.linear.x.max_acceleration:=1.0 -p limits.linear.y.max_acceleration:=1.0 \
+    -p limits.linear.x.max_deceleration:=1.5 -p limits.linear.y.max_deceleration:=1.5 \
+    -p limits.linear.x.max_velocity:=1.2 -p limits.linear.y.max_velocity:=1.2

@@ -54,6 +54,8 @@ def generate() -> str:
     from holonomic_core.driver import driver_class
     from pcv_base.description import PoweredCasterDescription
     from pcv_base.powered_caster import PoweredCasterKinematics
+    from swerve_base.description import SwerveDescription
+    from swerve_base.swerve import SwerveKinematics
 
     stand_in = SimpleNamespace(joint_names=("JOINT",), kind="ddrot")
     lines = [BEGIN, ""]
@@ -64,6 +66,10 @@ def generate() -> str:
     lines += _table("PCV geometry and body (`robot.kinematics: pcv`; NAME = each caster)",
                     PoweredCasterKinematics.param_specs({"pcv.casters": ["NAME"]})
                     + PoweredCasterDescription.param_specs({}))
+    lines += _table("Swerve geometry and body (`robot.kinematics: swerve`; NAME = each module; "
+                    "`swerve.NAME.h, beta` instead of `x, y` as for the PCV)",
+                    SwerveKinematics.param_specs({"swerve.modules": ["NAME"]})
+                    + SwerveDescription.param_specs({}))
     lines += _table("Joints (JOINT = each joint of the robot)", joint_specs("JOINT"))
     lines += _table("Base controller", CONTROLLER_SPECS)
     for name in ("sim", "mock", "odrive_can", "cia402"):

@@ -357,7 +357,9 @@ class BaseController:
         if self.joint_acceleration is not None:
             twist = self.joint_acceleration.limit(reading.positions, twist, self.twist_command,
                                                   self.joint_command, self.dt)
-        rates = self.model.kinematics.inverse(reading.positions, twist)
+        # the twist's rate since the last cycle feeds a steered wheel's turn forward
+        rates = self.model.kinematics.command(reading.positions, twist,
+                                              (twist - self.twist_command) / self.dt)
         rates, scale = self._saturate(rates, self._max_rates)
         if self.range_guard is not None:
             # slow down (direction kept) so that no ranged joint passes its range

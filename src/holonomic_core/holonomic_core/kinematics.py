@@ -40,6 +40,17 @@ class BaseKinematics(abc.ABC):
     def inverse(self, positions: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """Joint rates [rad/s] that realise ``twist`` (base_link) at ``positions``."""
 
+    def command(self, positions: np.ndarray, twist: np.ndarray,
+                twist_rate: np.ndarray | None = None) -> np.ndarray:
+        """Joint rates [rad/s] the control cycle commands towards ``twist`` at
+        the measured ``positions``, knowing the twist's rate ``twist_rate``
+        (ax, ay, alpha) [m/s^2, m/s^2, rad/s^2] in base_link (None: constant).
+
+        :meth:`inverse` for a family that realises any twist at once; a
+        family that must first turn its wheels (a swerve) feeds its steering
+        forward with the rate."""
+        return self.inverse(positions, twist)
+
     @abc.abstractmethod
     def forward(
         self,

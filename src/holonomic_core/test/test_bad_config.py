@@ -10,6 +10,7 @@ from holonomic_core.schema import ConfigError
 
 HAMR = resolve_config("hamr").read_text()
 XR4000 = resolve_config("xr4000").read_text()
+SWERVE4 = resolve_config("swerve4").read_text()
 
 
 def mutate(pattern: str, replacement: str, base: str = HAMR) -> str:
@@ -20,6 +21,10 @@ def mutate(pattern: str, replacement: str, base: str = HAMR) -> str:
 
 def mutate_xr(pattern: str, replacement: str) -> str:
     return mutate(pattern, replacement, XR4000)
+
+
+def mutate_sw(pattern: str, replacement: str) -> str:
+    return mutate(pattern, replacement, SWERVE4)
 
 
 # (case, YAML text, key the message must name, words of what is allowed)
@@ -100,6 +105,24 @@ CASES = [
                "front_left_steer_joint: {max_velocity: 12.0, max_effort: 5.0, "
                "max_acceleration: .inf}"),
      "joints.front_left_steer_joint.max_acceleration", "finite"),
+    # swerve bases
+    ("one swerve module", mutate_sw(r"modules: \[.*\]", "modules: [fl]"),
+     "swerve.modules", "at least 2"),
+    ("coincident swerve modules",
+     mutate_sw(r"rl: \{x: -0.25, y: 0.25\}", "rl: {x: 0.25, y: 0.25}"),
+     "swerve.rl.x", "coincide"),
+    ("zero swerve wheel radius", mutate_sw(r"wheel_radius: 0.075", "wheel_radius: 0.0"),
+     "swerve.wheel_radius", "(0, 10]"),
+    ("negative radius of one module",
+     mutate_sw(r"fr: \{x: 0.25, y: -0.25\}", "fr: {x: 0.25, y: -0.25, wheel_radius: -0.1}"),
+     "swerve.fr.wheel_radius", "(0, 10]"),
+    ("swerve module without its geometry", mutate_sw(r"^\s*rr: \{x: .*\n", ""),
+     "swerve.rr.x", "required"),
+    ("zero steering gain", mutate_sw(r"steering_gain: 8.0", "steering_gain: 0.0"),
+     "swerve.steering_gain", "(0, 1000]"),
+    ("torque mode on a swerve base", mutate_sw(r"control_rate: 200.0",
+                                               "control_rate: 200.0\n    control_mode: torque"),
+     "control_mode", "'velocity' for kinematics 'swerve'"),
     # typos are named as written, with the nearest key and the section's keys
     ("misspelt key in a section", mutate(r"physics_rate: 1000.0", "physics_rat: 1000.0"),
      "sim.physics_rat", "did you mean 'sim.physics_rate'? Valid keys of section 'sim': "),

@@ -73,6 +73,22 @@ def test_pcv_wheels_touch_the_floor_where_the_kinematics_put_the_contacts(robot)
                 == pytest.approx(0.0, abs=1e-9)
 
 
+def test_swerve_wheels_touch_the_floor_under_their_steering_axes():
+    # swerve4: no caster offset, so each wheel's centre is one radius (0.075 m)
+    # above the floor right under the module's (x, y), whatever the angles
+    model, tree = tree_of("swerve4")
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        q = rng.uniform(-math.pi, math.pi, len(model.joint_names))
+        poses = tree.poses_in_root(dict(zip(model.joint_names, q)))
+        for i, module in enumerate(model.kinematics.modules):
+            wheel = poses[f"{module.name}_wheel"]
+            assert wheel.translation == pytest.approx((module.x, module.y, 0.075), abs=1e-6)
+            yoke = poses[f"{module.name}_yoke"]
+            assert math.remainder(yaw_of(yoke.rotation) - q[2 * i], 2 * math.pi) \
+                == pytest.approx(0.0, abs=1e-9)
+
+
 def test_origin_rpy_axis_and_prismatic_joints_compose_as_urdf_says():
     urdf = """<robot name="t"><link name="a"/><link name="b"/><link name="c"/><link name="d"/>
     <joint name="j1" type="revolute"><parent link="a"/><child link="b"/>
@@ -106,7 +122,7 @@ def test_a_urdf_the_tree_cannot_place_is_rejected(urdf, what):
         LinkTree.from_urdf(urdf)
 
 
-@pytest.mark.parametrize("robot", ["hamr", "xr4000"])
+@pytest.mark.parametrize("robot", ["hamr", "xr4000", "swerve4"])
 def test_simulator_rests_base_link_on_the_floor_and_places_links_as_the_tree(robot):
     """The pybullet robot is the URDF the tree reads: base_link's origin on
     the floor, and every link's frame where the tree puts it for the joint

@@ -171,7 +171,7 @@ def test_an_unknown_family_names_the_installed_ones_and_the_nearest(toy_site):
 def test_the_core_names_no_package_above_it():
     core = Path(holonomic_core.__file__).resolve().parent
     above = ("hamr_base", "pcv_base", "holonomic_sim", "holonomic_drivers",
-             "holonomic_bringup", "holonomic_analysis")
+             "holonomic_bringup", "holonomic_analysis", "swerve_base")
     for path in sorted(core.rglob("*.py")):
         text = path.read_text()
         for name in above:

@@ -1,0 +1,1 @@
+"""Swerve bases: steered wheels without caster offset -- kinematics, steering law, odometry."""
