@@ -479,6 +479,9 @@ def build_model(flat: Mapping[str, Any]) -> tuple[RobotModel, list[ParamSpec]]:
                                jvalues[f"joints.{j}.max_effort"],
                                *checked_range(j, jvalues))
                    for j in kinematics.joint_names)
+    if any(lim.ranged for lim in limits):
+        kinematics = kinematics.with_joint_ranges(
+            [(lim.min_position, lim.max_position) if lim.ranged else None for lim in limits])
     model = RobotModel(values["robot.name"], kinematics, limits, MappingProxyType(values))
     return model, specs + jspecs
 

@@ -14,7 +14,7 @@ state (joint positions, odometry) lives in the caller.
 from __future__ import annotations
 
 import abc
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -50,6 +50,15 @@ class BaseKinematics(abc.ABC):
         family that must first turn its wheels (a swerve) feeds its steering
         forward with the rate."""
         return self.inverse(positions, twist)
+
+    def with_joint_ranges(self, ranges: Sequence[tuple[float, float] | None]) -> "BaseKinematics":
+        """This kinematics for joints with position ranges: ``ranges`` per joint
+        in :attr:`joint_names` order, ``(min_position, max_position)`` [rad]
+        or None (continuous). A family whose command chooses among joint
+        positions (a swerve's flip) returns a copy that chooses inside the
+        ranges; the others return themselves (the controller's range guard
+        keeps every family's joints inside)."""
+        return self
 
     @abc.abstractmethod
     def forward(

@@ -293,6 +293,14 @@ class SwerveKinematics(BaseKinematics):
             modules.append(Module(name, x, y, values[f"swerve.{name}.wheel_radius"]))
         return cls(modules, values["swerve.steering_gain"], values["swerve.hold_speed"])
 
+    def with_joint_ranges(self, ranges) -> "SwerveKinematics":
+        """A copy whose flip keeps each steering joint inside its range
+        (``joints.NAME.min_position / max_position``, per joint in
+        :attr:`joint_names` order; None: continuous)."""
+        by_joint = dict(zip(self.joint_names, ranges))
+        return type(self)(self.modules, self.steering_gain, self.hold_speed,
+                          steering_ranges=[by_joint[m.steer_joint] for m in self.modules])
+
 
 def check_module_names(names: list[str]) -> None:
     """Module names become joint names and parameter keys: valid and unique."""

@@ -247,3 +247,25 @@ def test_a_steering_range_narrower_than_pi_is_refused_naming_the_joint():
     with pytest.raises(ConfigError) as err:
         SwerveKinematics(modules, steering_ranges=[None, (-1.0, 1.0)])
     assert "'joints.b_steer_joint.max_position'" in str(err.value)
+
+
+def test_the_configured_steering_range_bounds_the_flip():
+    # joints.fl_steer_joint range (-pi/2, pi/2 + 0.1) from the config keys, as
+    # a params file sets it. At phi = 80 deg a pure translation along 120 deg
+    # at 1 m/s: fl may not turn +40 deg to 120 deg (outside) and reverses to
+    # -60 deg (-140 deg of travel): steering 8 * (-140 deg) = -19.548 rad/s,
+    # wheel cos(140 deg) < 0 clipped to 0; rl (continuous) turns +40 deg:
+    # 8 * 0.69813 = 5.585 rad/s, wheel cos 40 deg / r = 10.214 rad/s
+    ranged = load_model("swerve4", {"joints.fl_steer_joint.min_position": -math.pi / 2,
+                                    "joints.fl_steer_joint.max_position": math.pi / 2 + 0.1})
+    assert ranged.kinematics.steering_ranges == ((-math.pi / 2, math.pi / 2 + 0.1),
+                                                 None, None, None)
+    phi, t = math.radians(80), math.radians(120)
+    rates = ranged.kinematics.inverse(np.array([phi, 0.0] * 4),
+                                      np.array([math.cos(t), math.sin(t), 0.0]))
+    assert rates[:4] == pytest.approx([8.0 * math.radians(-140), 0.0,
+                                       8.0 * math.radians(40), math.cos(math.radians(40)) / R])
+    # a range a module cannot flip inside is refused naming the key
+    with pytest.raises(ConfigError, match="'joints.rr_steer_joint.max_position'"):
+        load_model("swerve4", {"joints.rr_steer_joint.min_position": -1.0,
+                               "joints.rr_steer_joint.max_position": 1.0})
