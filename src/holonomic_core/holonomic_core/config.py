@@ -39,6 +39,7 @@ from holonomic_core.loop import LOOP_SPECS
 from holonomic_core.model import JointLimits, RobotModel
 from holonomic_core.monitor import MonitorLimits
 from holonomic_core.odometry import OdometryNoise
+from holonomic_core.safety import SAFETY_SPECS
 from holonomic_core.schema import (ConfigError, ParamSpec, flatten, unknown_key_error,
                                    unknown_keys, validate)
 from holonomic_core.slip_monitor import SlipLimits
@@ -221,7 +222,7 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "How long a joint may miss its command by safety.tracking_error before the "
               "controller faults [s]; 0 disables the check.",
               default=0.5, minimum=0.0, maximum=60.0),
-] + _limit_specs() + DRIFT_SPECS + LOOP_SPECS
+] + _limit_specs() + DRIFT_SPECS + LOOP_SPECS + SAFETY_SPECS
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from holonomic_core.driver import Driver, DriverError, DriverFault, DriverState,
 from holonomic_core.limits import TwistLimiter, is_finite_twist, joint_rate_saturation
 from holonomic_core.monitor import ReadingMonitor
 from holonomic_core.odometry import Odometry
+from holonomic_core.safety import safety_from_values
 from holonomic_core.se2 import relative_pose
 from holonomic_core.slip_monitor import SlipMonitor
 from holonomic_core.torque import OperationalSpaceController
@@ -77,6 +78,8 @@ class ControllerStatus:
     drift_findings: tuple[str, ...] | None    #: None: no drift watch for this robot
     drift_judged: bool                   #: the drift watch has enough motion to judge
     drift_values: Mapping[str, str]
+    estop: str | None = None             #: why the emergency stop is pressed; None: released
+    holding: bool = False                #: disarmed, drives holding zero velocity (disarm_mode hold)
 
 
 #: how far back a command while disarmed makes the status say so [s]
@@ -136,6 +139,12 @@ class BaseController:
         self.saturation = 1.0
         self.stale = True
         self.fault: str | None = None
+        #: the emergency-stop input and what disarming does (holonomic_core.safety)
+        self.estop, self.disarm_policy = safety_from_values(config.values)
+        #: why the e-stop is pressed (None: released), as of the last cycle
+        self.estop_reason: str | None = None
+        #: clock time [s] a hold began (disarm_mode hold); None: not holding
+        self._holding_since: float | None = None
         self.counters = {"rejected_commands": 0, "timeouts": 0, "driver_errors": 0,
                          "implausible_readings": 0, "cycles": 0, "commands_while_disarmed": 0}
         #: clock time [s] of the last non-zero command received while the
@@ -185,6 +194,19 @@ class BaseController:
         """
         return self._request("enable", bool(enable))
 
+    def request_estop(self, pressed: bool, source: str = "emergency_stop",
+                      stamp: float | None = None) -> None:
+        """One message of the emergency-stop input (any thread): pressed or
+        released, from ``source``, received at ``stamp`` [s, this clock].
+        The next cycle quick-stops the drives; a release re-arms nothing."""
+        self.estop.update(pressed, source, self._clock() if stamp is None else stamp)
+
+    def request_set_pose(self, pose, covariance=None) -> concurrent.futures.Future:
+        """Ask the loop to set the odometry pose (x, y, yaw) [m, m, rad] and
+        its covariance (9 values, 3 x 3 row-major; None: zero). Safe during
+        motion: the odometry goes on from the new pose."""
+        return self._request("set_pose", (tuple(pose), covariance))
+
     def request_reset_odometry(self) -> concurrent.futures.Future:
         """Ask the loop to reset the odometry pose to the origin."""
         return self._request("reset_odometry", None)
@@ -200,7 +222,8 @@ class BaseController:
     def state(self) -> ControllerState:
         if self.fault is not None:
             return ControllerState.FAULT
-        return ControllerState.ARMED if self.driver.armed else ControllerState.DISARMED
+        return (ControllerState.ARMED if self.driver.armed and self._holding_since is None
+                else ControllerState.DISARMED)
 
     def command_age(self) -> float:
         """Seconds since the last command (inf if none)."""
@@ -229,7 +252,8 @@ class BaseController:
             slip_threshold=self.slip_monitor.limits.threshold,
             drift_findings=None if self.drift is None else tuple(self.drift.findings()),
             drift_judged=self.drift is not None and self.drift.error is not None,
-            drift_values={} if self.drift is None else dict(self.drift.values()))
+            drift_values={} if self.drift is None else dict(self.drift.values()),
+            estop=self.estop_reason, holding=self._holding_since is not None)
 
     # -- the cycle (loop thread) ----------------------------------------------------
     def step(self, take_command: Callable[[], None] | None = None) -> bool:
@@ -242,6 +266,7 @@ class BaseController:
         at a fixed point of every cycle. Not called on a cycle whose reading
         failed or was implausible (the caller then takes the command itself)."""
         self.counters["cycles"] += 1
+        self._check_estop()
         self._process_requests()
         try:
             reading = self.driver.read()
@@ -277,8 +302,12 @@ class BaseController:
             self.saturation = 1.0
             return True
 
-        sample = self._trajectory_sample()
-        if sample is None:
+        if self._holding_since is not None and self._hold_over():
+            return True
+        sample = self._trajectory_sample() if self._holding_since is None else None
+        if self._holding_since is not None:
+            target = _ZERO3          # disarmed, holding: to rest and stay there
+        elif sample is None:
             target = self._target()
         else:
             # velocity mode follows the sample by feed-forward twist plus a
@@ -364,6 +393,10 @@ class BaseController:
             try:
                 if kind == "enable":
                     result = self._arm() if arg else self._disarm()
+                elif kind == "set_pose":
+                    self.odometry.set_pose(*arg)
+                    x, y, yaw = arg[0]
+                    result = (True, f"odometry set to x {x:g} m, y {y:g} m, yaw {yaw:g} rad")
                 else:
                     self.odometry.reset()
                     self.slip_monitor.reset()
@@ -374,8 +407,11 @@ class BaseController:
             future.set_result(result)
 
     def _arm(self) -> tuple[bool, str]:
-        if self.driver.armed:
+        if self.estop_reason is not None:
+            return False, f"refused: {self.estop_reason}; release the emergency stop first"
+        if self.driver.armed and self._holding_since is None:
             return True, "already armed"
+        self._holding_since = None
         # A fault is cleared only if the driver answers again, plausibly.
         reading = self.driver.read()
         self.monitor.reset()
@@ -395,10 +431,48 @@ class BaseController:
         return True, "motors armed"
 
     def _disarm(self) -> tuple[bool, str]:
+        self._trajectory = None
+        policy = self.disarm_policy
+        if policy.holds and self.driver.armed and self._holding_since is None:
+            # to rest under the deceleration limits, then zero velocity
+            self._holding_since = self._clock()
+            self._command = None
+            until = (f"for {policy.hold_time:g} s" if policy.hold_time > 0.0
+                     else "until disarmed again")
+            return True, f"motors disarmed; holding the base at rest {until}"
+        self._holding_since = None
         self.driver.deactivate()
         self.twist_command = np.zeros(3)
-        self._trajectory = None
         return True, "motors disarmed"
+
+    def _hold_over(self) -> bool:
+        """End a hold whose safety.hold_time has run (idle the drives)."""
+        if not self.disarm_policy.hold_over(self._holding_since, self._clock()):
+            return False
+        self._holding_since = None
+        try:
+            self.driver.deactivate()
+        except DriverError as exc:
+            self._on_fault(exc)
+        self.twist_command = np.zeros(3)
+        self.joint_command[:] = 0.0
+        return True
+
+    def _check_estop(self) -> None:
+        """Quick-stop and disarm when the e-stop is (or becomes) pressed."""
+        reason = self.estop.reason(self._clock())
+        self.estop_reason = reason
+        if reason is None or not self.driver.armed:
+            return
+        self._holding_since = None
+        self._trajectory = None
+        self._command = None
+        self.twist_command = np.zeros(3)
+        self.joint_command[:] = 0.0
+        try:
+            self.driver.quick_stop()
+        except DriverError as exc:
+            self._on_fault(exc)
 
     def _on_fault(self, exc: DriverError) -> None:
         self.counters["driver_errors"] += 1
@@ -414,6 +488,7 @@ class BaseController:
             self.fault = reason
         self.twist_command = np.zeros(3)
         self._trajectory = None
+        self._holding_since = None
         self.joint_command[:] = 0.0
         try:
             self.driver.deactivate()
