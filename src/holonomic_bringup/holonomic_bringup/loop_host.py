@@ -270,6 +270,14 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
         elif kind == "reset_odometry":
             _, k, rid = message
             robots[k].pending.append((robots[k].controller.request_reset_odometry(), rid))
+        elif kind == "estop":
+            _, k, pressed, source, received, rid = message
+            robots[k].controller.request_estop(pressed, source, received)
+            wire.send(sock, ("reply", rid, (True, "pressed" if pressed else "released")))
+        elif kind == "set_pose":
+            _, k, pose, covariance, rid = message
+            robots[k].pending.append((robots[k].controller.request_set_pose(pose, covariance),
+                                      rid))
 
     def poll_control() -> None:
         while True:
