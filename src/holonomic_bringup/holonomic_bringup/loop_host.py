@@ -179,7 +179,8 @@ def _build(setup: HostSetup, sock, before_drivers=None):
     world = None
     if setup.shared_world:
         from holonomic_sim.world import SimWorld
-        world = SimWorld(configs[0].values["sim.physics_rate"])
+        world = SimWorld(configs[0].values["sim.physics_rate"],
+                         floor_tilt=configs[0].values["sim.floor_tilt"])
     robots, drivers = [], []
     try:
         for k, (cfg, robot) in enumerate(zip(configs, setup.robots)):
