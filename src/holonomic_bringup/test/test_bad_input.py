@@ -27,6 +27,11 @@ BRINGUP = [
     (["hamr", "-p", "control_rate"], "-p expects NAME:=VALUE"),
     (["hamr", "-p", "control_rate:=[1"], "not valid YAML"),
     (["hamr", "-p", "control_rate:=fast"], "'control_rate' = 'fast': expected a number"),
+    (["hamr", "-p", "safety.disarm_mode:=brake"],
+     "'safety.disarm_mode' = 'brake': expected one of ['hold', 'coast']"),
+    (["hamr", "-p", "safety.hold_time:=-1"], "'safety.hold_time' = -1"),
+    (["hamr", "-p", "safety.estop_timeout:=-1"], "'safety.estop_timeout' = -1"),
+    (["hamr", "-p", "sim.floor_tilt:=95"], "'sim.floor_tilt' = 95"),
     (["hamr", "-p", "sim.wheel_fiction:=0.8"], "did you mean 'sim.wheel_friction'"),
     (["hamr", "--namespace", "my robot"], "'my robot' is not a ROS namespace"),
     (["hamr", "--namespace", "1abc"], "'1abc' is not a ROS namespace"),
@@ -66,6 +71,9 @@ CTL = [
     (["enable", "--namespace", "my robot"], "'my robot' is not a ROS namespace"),
     (["status", "--timeout", "0"], "--timeout: expected a number in (0, 600] s"),
     (["enable", "--json"], "--json goes with status only"),
+    (["set-pose", "1", "nan", "0"], "X Y YAW: expected a number in [-1e+06, 1e+06]"),
+    (["set-pose", "1", "2"], "set-pose needs X Y YAW (3 numbers), got 2"),
+    (["estop", "1"], "estop takes no numbers"),
 ]
 
 PLOT = [
