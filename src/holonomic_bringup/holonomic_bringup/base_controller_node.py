@@ -510,7 +510,8 @@ class BaseControllerNode(Node):
             fault=status.fault if status is not None else None, stale=record.stale,
             saturation=record.saturation,
             truth_pose=None if truth_pose is None else tuple(truth_pose.tolist()),
-            truth_twist=None if truth_twist is None else tuple(truth_twist.tolist()))
+            truth_twist=None if truth_twist is None else tuple(truth_twist.tolist()),
+            estop=status.estop if status is not None else None)
 
     # -- diagnostics ------------------------------------------------------------------
     def _on_status(self, status, loop: dict) -> None:
