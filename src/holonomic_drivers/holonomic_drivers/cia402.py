@@ -507,20 +507,7 @@ class Cia402Driver(CanDriver):
         target on every drive, then SYNC at once. Each drive brakes as its
         0x605A says (on its quick stop deceleration 0x6085 for 2 and 6) and
         then disables (1-4) or holds in QUICK STOP ACTIVE (5-8)."""
-        failure = None
-        for i in range(len(self.devices)):
-            try:
-                if self._in_torque[i]:
-                    self._send_torque(i, Control.QUICK_STOP, 0)
-                self._send_velocity(i, Control.QUICK_STOP, 0)
-            except DriverCommunicationError as exc:
-                failure = failure or exc
-        try:
-            self._send_sync()
-        except DriverCommunicationError as exc:
-            failure = failure or exc
-        if failure is not None:
-            raise failure
+        self._stop_all(Control.QUICK_STOP)
 
     def _download(self, i: int, index: int, sub: int, data: bytes) -> None:
         """One SDO write to joint ``i``'s device; a refusal names object and value."""
@@ -896,14 +883,15 @@ class Cia402Driver(CanDriver):
                                            PREFIX) from exc
         self.counters["frames_sent"] += 1
 
-    def _stop_all(self) -> None:
-        """Disable operation with zero targets on every drive, then SYNC now."""
+    def _stop_all(self, word: int = Control.SWITCH_ON) -> None:
+        """Controlword ``word`` (default: disable operation) with zero targets
+        on every drive, then SYNC now."""
         failure = None
         for i in range(len(self.devices)):
             try:
                 if self._in_torque[i]:
-                    self._send_torque(i, Control.SWITCH_ON, 0)
-                self._send_velocity(i, Control.SWITCH_ON, 0)
+                    self._send_torque(i, word, 0)
+                self._send_velocity(i, word, 0)
             except DriverCommunicationError as exc:
                 failure = failure or exc
         try:
