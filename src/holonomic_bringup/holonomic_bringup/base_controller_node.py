@@ -57,6 +57,7 @@ from holonomic_core.se2 import quaternion_of_yaw
 from holonomic_bringup import loop_wire as wire
 from holonomic_bringup.loop_client import LoopClient, LoopLost
 from holonomic_bringup.packed_messages import PackedMessage
+from holonomic_bringup.safety_inputs import SafetyInputs, estop_diagnostic
 from holonomic_bringup.process_guard import (STOP, InstanceConflict, InstanceLock,
                                              install_signal_handlers)
 
@@ -294,6 +295,8 @@ class BaseControllerNode(Node):
         self.create_service(Trigger, "~/reset_odometry", self._on_reset_odometry)
         self.create_service(Trigger, "~/unwind", self._on_unwind)
         self.create_service(SetBool, "~/enable", self._on_enable)
+        # emergency_stop and set_pose (holonomic_bringup.safety_inputs)
+        self._safety_inputs = SafetyInputs(self, self.link)
 
         # Every cycle's messages have a fixed layout (names, frames, array
         # lengths): serialized once, each publish writes only the numbers
@@ -516,7 +519,8 @@ class BaseControllerNode(Node):
             fault=status.fault if status is not None else None, stale=record.stale,
             saturation=record.saturation,
             truth_pose=None if truth_pose is None else tuple(truth_pose.tolist()),
-            truth_twist=None if truth_twist is None else tuple(truth_twist.tolist()))
+            truth_twist=None if truth_twist is None else tuple(truth_twist.tolist()),
+            estop=status.estop if status is not None else None)
 
     # -- diagnostics ------------------------------------------------------------------
     def _on_status(self, status, loop: dict) -> None:
@@ -537,6 +541,7 @@ class BaseControllerNode(Node):
                               for k, v in loop.items()}),
             self._command_status(status),
             self._odometry_status(status),
+            self._status_msg(f"{NODE_NAME}: emergency stop", *estop_diagnostic(status)),
         ]
         if status.drift_findings is not None:
             # its own status: a geometry that drifted is not a slip event

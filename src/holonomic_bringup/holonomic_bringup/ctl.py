@@ -8,7 +8,11 @@ the ros2 CLI (which a pip-only install does not have).
                                                       back to the middle of its range by
                                                       loops about the start; waits for the
                                                       end (any cmd_vel or disable cancels)
-    holonomic-ctl status           [--namespace NS]   armed/disarmed, fault and its cause,
+    holonomic-ctl estop            [--namespace NS]   press the emergency stop (emergency_stop
+                                                      true, latched): the drives quick-stop
+    holonomic-ctl release          [--namespace NS]   release it (the motors stay disarmed)
+    holonomic-ctl set-pose X Y YAW [--namespace NS]   odometry jumps to (X, Y) [m], YAW [rad]
+    holonomic-ctl status           [--namespace NS]   armed/disarmed, e-stop, fault and its cause,
                                                       loop rate, odometry pose, slip residuals
 
 status reads what the base controller publishes (diagnostics, 1 Hz, and
@@ -29,7 +33,8 @@ from holonomic_bringup.ros_names import namespace
 from holonomic_core.command_line import ArgumentParser, ShowDefaults, number
 
 PROG = "holonomic-ctl"
-COMMANDS = ("enable", "disable", "reset-odometry", "status", "unwind")
+COMMANDS = ("enable", "disable", "reset-odometry", "estop", "release", "set-pose", "status",
+            "unwind")
 CONTROLLER = "base_controller"
 
 
@@ -37,6 +42,8 @@ def parse_args(argv: list[str] | None):
     p = ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0].replace("\n", " "),
                        epilog="\n\n".join(__doc__.split("\n\n")[1:]), formatter_class=ShowDefaults)
     p.add_argument("command", choices=COMMANDS, help="what to do")
+    p.add_argument("pose", nargs="*", type=number(-1e6, 1e6), metavar="X Y YAW",
+                   help="set-pose: the pose in odom [m, m, rad]")
     p.add_argument("--namespace", type=namespace, default="",
                    help="the robot's namespace, as given to holonomic-bringup (e.g. robot1)")
     p.add_argument("--timeout", type=number(0.0, 600.0, strict_low=True, unit="s"), default=10.0,
@@ -45,6 +52,10 @@ def parse_args(argv: list[str] | None):
     args = p.parse_args(argv)
     if args.json and args.command != "status":
         p.error("--json goes with status only")
+    if args.command == "set-pose" and len(args.pose) != 3:
+        p.error(f"set-pose needs X Y YAW (3 numbers), got {len(args.pose)}")
+    if args.command != "set-pose" and args.pose:
+        p.error(f"{args.command} takes no numbers (only set-pose X Y YAW does)")
     return args
 
 
@@ -76,6 +87,7 @@ def status_from_diagnostics(statuses: list[dict], pose) -> dict:
         "command": command.get("message"),
         "unwind": command.get("values", {}).get("unwind"),
         "command_warning": command.get("level") == 1,
+        "estop": by_name.get("emergency stop", {}).get("values", {}).get("source"),
     }
 
 
@@ -92,10 +104,13 @@ def format_status(status: dict, ns: str) -> str:
     flag = f" --namespace {ns.strip('/')}" if ns else ""
     state = status["state"]
     motors = state.upper()
-    if state == "disarmed":
+    if state == "disarmed" and status.get("estop"):
+        motors += f"  (e-stop pressed: holonomic-ctl release{flag}, then enable)"
+    elif state == "disarmed":
         motors += f"  (arm: holonomic-ctl enable{flag})"
     lines = [f"robot      {status['robot'] or '?'} at {where}",
              f"motors     {motors}",
+             f"e-stop     {('PRESSED: ' + status['estop']) if status.get('estop') else 'released'}",
              f"fault      {status['fault'] or 'none'}"]
     if status["loop_rate_hz"] is not None:
         lines.append(f"loop       {status['loop_rate_hz']:.1f} Hz "
@@ -227,6 +242,16 @@ def main(argv: list[str] | None = None) -> int:
                 return 1
             print(json.dumps(status) if args.json else format_status(status, ns))
             return 0
+        if args.command in ("estop", "release", "set-pose"):
+            from holonomic_bringup.safety_commands import estop, set_pose
+
+            if args.command == "set-pose":
+                ok, text = set_pose(node, ns, args.pose, args.timeout)
+            else:
+                ok, text = estop(node, ns, args.command == "estop", args.timeout)
+            print(f"{args.command}: {text}" if ok else f"{PROG}: {text}",
+                  file=sys.stdout if ok else sys.stderr)
+            return 0 if ok else 1
         if args.command == "reset-odometry":
             response, problem = _call(node, Trigger, f"{service}/reset_odometry",
                                       Trigger.Request(), args.timeout)

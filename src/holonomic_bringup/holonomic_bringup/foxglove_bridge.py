@@ -23,7 +23,7 @@ docs/foxglove.md for the table):
   ``twist_command`` (``geometry_msgs/msg/Twist``: the twist the controller
   tracks, after the limits), ``joint_states`` (``sensor_msgs/msg/JointState``),
   ``slip_residual`` (each caster's contact-velocity residual [m/s]),
-  ``controller_state`` (armed, fault, stale command, saturation) and
+  ``controller_state`` (armed, fault, emergency stop, stale command, saturation) and
   ``diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray`` as JSON).
 
 The JSON channels keep the ROS field names, so one Foxglove layout plots the
@@ -103,6 +103,7 @@ class RobotSnapshot:
     saturation: float
     truth_pose: Planar | None = None
     truth_twist: Planar | None = None
+    estop: str | None = None        #: why the emergency stop is pressed; None: released
 
 
 @dataclass(frozen=True)
@@ -214,7 +215,7 @@ JSON_SCHEMAS = {
     "holonomic/ControllerState": _json_schema({
         "state": {"type": "string"}, "armed": {"type": "boolean"},
         "fault": {"type": "string"}, "stale_command": {"type": "boolean"},
-        "saturation": _NUMBER}),
+        "saturation": _NUMBER, "estop": {"type": "string"}}),
 }
 
 
@@ -373,7 +374,8 @@ class _RobotChannels:
                                "position": list(s.joint_positions),
                                "velocity": list(s.joint_velocities)}, log_time=t)
         self.state.log({"state": s.state, "armed": s.state == "armed", "fault": s.fault or "",
-                        "stale_command": s.stale, "saturation": s.saturation}, log_time=t)
+                        "stale_command": s.stale, "saturation": s.saturation,
+                        "estop": s.estop or ""}, log_time=t)
         if self.slip is not None:
             self.slip.log(dict(zip(self.feed.description.caster_names, s.slip_residual)),
                           log_time=t)

@@ -78,6 +78,14 @@ class RobotLink:
     def request_unwind(self) -> concurrent.futures.Future:
         """Start the unwind maneuver; resolves to (success, plan or why not)."""
         return self.client.request(("unwind", self.index))
+    def request_estop(self, pressed: bool, source: str, received: float) -> None:
+        """One emergency_stop message (received at ``received`` [s,
+        time.monotonic()], the loop's clock: the heartbeat is timed there)."""
+        self.client.request(("estop", self.index, bool(pressed), str(source), float(received)))
+
+    def request_set_pose(self, pose, covariance) -> concurrent.futures.Future:
+        """Set the odometry pose (x, y, yaw) and its 9-value covariance."""
+        return self.client.request(("set_pose", self.index, tuple(pose), tuple(covariance)))
 
     def read_records(self) -> bool:
         """Read what the state pipe holds; ``on_record`` each whole record

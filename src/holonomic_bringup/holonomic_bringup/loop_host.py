@@ -180,7 +180,8 @@ def _build(setup: HostSetup, sock, before_drivers=None):
     world = None
     if setup.shared_world:
         from holonomic_sim.world import SimWorld
-        world = SimWorld(configs[0].values["sim.physics_rate"])
+        world = SimWorld(configs[0].values["sim.physics_rate"],
+                         floor_tilt=configs[0].values["sim.floor_tilt"])
     robots, drivers = [], []
     try:
         for k, (cfg, robot) in enumerate(zip(configs, setup.robots)):
@@ -275,6 +276,14 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
         elif kind == "unwind":
             _, k, rid = message
             robots[k].pending.append((robots[k].controller.request_unwind(), rid))
+        elif kind == "estop":
+            _, k, pressed, source, received, rid = message
+            robots[k].controller.request_estop(pressed, source, received)
+            wire.send(sock, ("reply", rid, (True, "pressed" if pressed else "released")))
+        elif kind == "set_pose":
+            _, k, pose, covariance, rid = message
+            robots[k].pending.append((robots[k].controller.request_set_pose(pose, covariance),
+                                      rid))
 
     def poll_control() -> None:
         while True:

@@ -15,6 +15,7 @@ strafing and diagonals at constant heading::
     q / z : all speeds x1.1 / x0.9      w / x : linear only     e / c : turn only
     space or k or K : stop              Ctrl-C : stop and quit
     A (Shift-a) : arm the motors        d : disarm them      (the controller's ~/enable)
+    s or S : EMERGENCY STOP             R (Shift-r) : release it (emergency_stop; arm again with A)
 
 The command is published at ``--rate`` Hz. A movement key holds its command
 for ``--key-timeout`` seconds (longer than the terminal's key-repeat delay),
@@ -54,6 +55,8 @@ SPEED_KEYS = {"q": (1.1, 1.1), "z": (0.9, 0.9), "w": (1.1, 1.0), "x": (0.9, 1.0)
 STOP_KEYS = {" ", "k", "K"}
 #: key -> arm (True) / disarm (False); arming takes Shift, a deliberate key
 ENABLE_KEYS = {"A": True, "d": False, "D": False}
+#: key -> press (True) / release (False) the emergency stop; release takes Shift
+ESTOP_KEYS = {"s": True, "S": True, "R": False}
 #: seconds after start before an absent subscriber is reported (DDS discovery
 #: takes up to ~2.5 s on one machine)
 DISCOVERY_GRACE = 3.0
@@ -91,6 +94,9 @@ class TeleopState:
         if ch in ENABLE_KEYS:
             self.motion = (0, 0, 0)
             return "arm" if ENABLE_KEYS[ch] else "disarm"
+        if ch in ESTOP_KEYS:
+            self.motion = (0, 0, 0)
+            return "estop" if ESTOP_KEYS[ch] else "release"
         if ch in SPEED_KEYS:
             lin, ang = SPEED_KEYS[ch]
             self.speed = min(self.max_speed, self.speed * lin)
@@ -141,6 +147,12 @@ class RobotLink:
         self._request = SetBool.Request
         self.state = "unknown"
         self._enable = node.create_client(SetBool, f"{ns}/base_controller/enable")
+        from std_msgs.msg import Bool
+
+        from holonomic_bringup.safety_inputs import ESTOP_QOS, ESTOP_TOPIC
+        # latched while teleop runs: a controller started later sees it too
+        self._bool = Bool
+        self._estop = node.create_publisher(Bool, f"{ns}/{ESTOP_TOPIC}", ESTOP_QOS)
         node.create_subscription(DiagnosticArray, f"{ns}/diagnostics", self._on_diag, 10)
         self._listened: bool | None = None
 
@@ -164,6 +176,13 @@ class RobotLink:
 
     def moving_while_disarmed(self) -> bool:
         return self.state in ("disarmed", "fault")
+
+    def estop(self, pressed: bool) -> None:
+        """Press or release the emergency stop (emergency_stop)."""
+        self._estop.publish(self._bool(data=pressed))
+        self._write(f"EMERGENCY STOP pressed ({self._estop.topic_name}): R releases it"
+                    if pressed else f"emergency stop released ({self._estop.topic_name}): "
+                    "the motors stay disarmed, A arms them")
 
     def enable(self, on: bool) -> None:
         """Call ~/enable; the answer is written when it comes."""
@@ -250,6 +269,8 @@ def main(argv: list[str] | None = None) -> int:
                 for status in filter(None, statuses):
                     if status in ("arm", "disarm"):
                         link.enable(status == "arm")
+                    elif status in ("estop", "release"):
+                        link.estop(status == "estop")
                     else:
                         write(status)
                 if any(ch in MOVE_KEYS for ch in keys) and link.moving_while_disarmed() \

@@ -27,6 +27,11 @@ BRINGUP = [
     (["hamr", "-p", "control_rate"], "-p expects NAME:=VALUE"),
     (["hamr", "-p", "control_rate:=[1"], "not valid YAML"),
     (["hamr", "-p", "control_rate:=fast"], "'control_rate' = 'fast': expected a number"),
+    (["hamr", "-p", "safety.disarm_mode:=brake"],
+     "'safety.disarm_mode' = 'brake': expected one of ['hold', 'coast']"),
+    (["hamr", "-p", "safety.hold_time:=-1"], "'safety.hold_time' = -1"),
+    (["hamr", "-p", "safety.estop_timeout:=-1"], "'safety.estop_timeout' = -1"),
+    (["hamr", "-p", "sim.floor_tilt:=95"], "'sim.floor_tilt' = 95"),
     (["hamr", "-p", "sim.wheel_fiction:=0.8"], "did you mean 'sim.wheel_friction'"),
     (["hamr", "-p", "safety.glitch_policy:=ignore"],
      "'safety.glitch_policy' = 'ignore': expected one of"),
@@ -87,6 +92,9 @@ CTL = [
     (["unwind", "--json"], "--json goes with status only"),
     (["unwind", "--timeout", "-1"], "--timeout: expected a number in (0, 600] s"),
     (["unwnd"], "invalid choice: 'unwnd'"),
+    (["set-pose", "1", "nan", "0"], "X Y YAW: expected a number in [-1e+06, 1e+06]"),
+    (["set-pose", "1", "2"], "set-pose needs X Y YAW (3 numbers), got 2"),
+    (["estop", "1"], "estop takes no numbers"),
 ]
 
 PLOT = [

@@ -138,10 +138,11 @@ def test_channels_use_standard_schemas_and_the_server_is_read_only(client):
     assert set(frames) == links | {"base_link_ground_truth"}
     assert frames["base_link"][0] == "odom"
     state = client.json("/controller_state")
-    assert state["state"] == "armed" and state["fault"] == ""
+    assert state["state"] == "armed" and state["fault"] == "" and state["estop"] == ""
     diagnostics = client.json("/diagnostics")
     names = {s["name"] for s in diagnostics["status"]}
     assert "base_controller: control loop" in names
+    assert "base_controller: emergency stop" in names
     assert all(s["level"] in (0, 1, 2, 3) for s in diagnostics["status"])
     path = client.wait_for("/path/odom")
     assert path        # a PosesInFrame with at least the start pose

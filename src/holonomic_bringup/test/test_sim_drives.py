@@ -300,3 +300,45 @@ def test_the_can_driver_steers_and_drives_a_simulated_swerve_base(rig_factory, b
     steer = rig.controller.reading.positions[0::2]
     assert np.abs(np.abs(steer) - math.pi / 2) == pytest.approx([0.0] * 4, abs=0.03)
     assert np.abs(odom - truth) == pytest.approx(np.zeros(3), abs=0.02)
+
+
+@pytest.mark.parametrize("backend,overrides", [
+    ("cia402", {}), ("odrive_can", {}), ("odrive_can", {"odrive_can.firmware": "0.5"})])
+def test_estop_sends_the_quick_stop_on_the_wire_and_the_base_stops(
+        rig_factory, backend, overrides):
+    from holonomic_drivers.cia402_protocol import State
+    from holonomic_drivers.odrive_protocol import ESTOP_REQUESTED, AxisState
+
+    rig = rig_factory(backend, **overrides)
+    rig.arm()
+    rig.run(1.0, (0.5, 0.0, 0.0))
+    assert rig.controller.state is ControllerState.ARMED, rig.controller.fault
+    rig.controller.request_estop(True, "test")
+    rig.run(1.0, (0.5, 0.0, 0.0))          # commands go on: they are not followed
+    assert rig.controller.fault is None
+    assert rig.controller.status().estop == "emergency stop pressed by test"
+    drives = rig.driver.drives
+    if backend == "cia402":
+        # controlword QUICK STOP reached every drive: QUICK STOP ACTIVE, then
+        # (the emulated drives' option code 2) SWITCH ON DISABLED once at
+        # rest -- a plain disarm ("disable operation") ends SWITCHED ON
+        assert all(d.state(0) in (State.QUICK_STOP_ACTIVE, State.SWITCH_ON_DISABLED)
+                   for d in drives), [d.state(0) for d in drives]
+    elif overrides.get("odrive_can.firmware") == "0.5":
+        # the braking ramp: closed loop at zero velocity
+        assert all(d.axis_state == AxisState.CLOSED_LOOP_CONTROL for d in drives)
+    else:
+        # the Estop frame: every axis disarmed with ESTOP_REQUESTED
+        assert all(d.disarm_reason & ESTOP_REQUESTED["0.6"] for d in drives)
+        assert all(d.axis_state == AxisState.IDLE for d in drives)
+    # the base is at rest after a second (measured stop from 1 m/s: 0.09 m,
+    # bench/estop_stop.py)
+    assert abs(rig.driver.ground_truth().twist[0]) < 0.01
+    # enable is refused until released; a release does not re-arm
+    future = rig.controller.request_enable(True)
+    rig.controller.step()
+    assert future.result(timeout=5.0)[0] is False
+    rig.controller.request_estop(False, "test")
+    rig.run(0.2, (0.5, 0.0, 0.0))
+    assert rig.controller.state is ControllerState.DISARMED
+    rig.arm()

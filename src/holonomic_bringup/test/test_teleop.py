@@ -60,6 +60,15 @@ def test_shift_a_arms_and_d_disarms_and_both_stop_the_motion():
     assert s.key("a", 0.5) is None      # lower-case a: no accidental arming
 
 
+def test_s_presses_the_emergency_stop_and_shift_r_releases_it():
+    s = state()
+    s.key("I", 0.0)
+    assert s.key("s", 0.1) == "estop" and s.twist(0.1) == (0, 0, 0)
+    assert s.key("S", 0.2) == "estop"
+    assert s.key("R", 0.3) == "release"
+    assert s.key("r", 0.4) is None      # lower-case r: no accidental release
+
+
 @pytest.fixture
 def listen(ros):
     """Factory: record the messages of a topic on the test's node."""
@@ -148,6 +157,21 @@ def test_arm_keys_reach_the_robot_and_the_screen_says_who_listens(ros, tmp_path)
         teleop.press("d")
         wait_until(lambda: controller_state(probe) == "disarmed", 10, "the motors to disarm")
         wait_until(lambda: (teleop.drain(), b"disarm: " in teleop.output)[1], 5, "the answer")
+        # the e-stop key: quick stop, arming refused until R, R does not arm
+        teleop.press("A")
+        wait_until(lambda: controller_state(probe) == "armed", 10, "the motors to arm")
+        teleop.press("s")
+        wait_until(lambda: controller_state(probe) == "disarmed", 10, "the e-stop to disarm")
+        teleop.press("A")
+        wait_until(lambda: (teleop.drain(), b"release the emergency stop first"
+                            in teleop.output)[1], 10, "arming refused")
+        teleop.press("R")
+        wait_until(lambda: (teleop.drain(), b"emergency stop released" in teleop.output)[1],
+                   5, "the release line")
+        time.sleep(1.5)
+        assert controller_state(probe) == "disarmed"
+        teleop.press("A")
+        wait_until(lambda: controller_state(probe) == "armed", 10, "arming after the release")
     finally:
         assert teleop.stop() == 0
         probe.close()

@@ -42,6 +42,7 @@ from holonomic_core.loop import LOOP_SPECS
 from holonomic_core.model import JointLimits, RobotModel
 from holonomic_core.monitor import MonitorLimits
 from holonomic_core.odometry import OdometryNoise
+from holonomic_core.safety import SAFETY_SPECS
 from holonomic_core.schema import (ConfigError, ParamSpec, flatten, unknown_key_error,
                                    unknown_keys, validate)
 from holonomic_core.slip_monitor import SlipLimits
@@ -248,7 +249,7 @@ CONTROLLER_SPECS: list[ParamSpec] = [
               "With safety.glitch_policy drop: dropped readings per minute above which the "
               "next invalid reading faults [1/min].",
               default=10.0, minimum=0.0, maximum=600.0),
-] + _limit_specs() + DRIFT_SPECS + LOOP_SPECS
+] + _limit_specs() + DRIFT_SPECS + LOOP_SPECS + SAFETY_SPECS
 
 
 @dataclass(frozen=True)

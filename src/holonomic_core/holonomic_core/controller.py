@@ -41,6 +41,7 @@ from holonomic_core.joint_range import JointRangeGuard
 from holonomic_core.limits import TwistLimiter, is_finite_twist, joint_rate_saturation
 from holonomic_core.monitor import ReadingMonitor
 from holonomic_core.odometry import Odometry
+from holonomic_core.safety import safety_from_values
 from holonomic_core.se2 import relative_pose
 from holonomic_core.slip_monitor import SlipMonitor
 from holonomic_core.torque import OperationalSpaceController
@@ -90,6 +91,8 @@ class ControllerStatus:
     #: the unwind maneuver: running (progress) or how the last one ended; None: none yet
     unwind: str | None = None
     unwinding: bool = False              #: the unwind maneuver is running
+    estop: str | None = None             #: why the emergency stop is pressed; None: released
+    holding: bool = False                #: disarmed, drives holding zero velocity (disarm_mode hold)
 
 
 #: how far back a command while disarmed makes the status say so [s]
@@ -164,6 +167,12 @@ class BaseController:
         self.saturation = 1.0
         self.stale = True
         self.fault: str | None = None
+        #: the emergency-stop input and what disarming does (holonomic_core.safety)
+        self.estop, self.disarm_policy = safety_from_values(config.values)
+        #: why the e-stop is pressed (None: released), as of the last cycle
+        self.estop_reason: str | None = None
+        #: clock time [s] a hold began (disarm_mode hold); None: not holding
+        self._holding_since: float | None = None
         self.counters = {"rejected_commands": 0, "timeouts": 0, "driver_errors": 0,
                          "implausible_readings": 0, "cycles": 0, "commands_while_disarmed": 0}
         #: clock time [s] of the last non-zero command received while the
@@ -214,6 +223,19 @@ class BaseController:
         """
         return self._request("enable", bool(enable))
 
+    def request_estop(self, pressed: bool, source: str = "emergency_stop",
+                      stamp: float | None = None) -> None:
+        """One message of the emergency-stop input (any thread): pressed or
+        released, from ``source``, received at ``stamp`` [s, this clock].
+        The next cycle quick-stops the drives; a release re-arms nothing."""
+        self.estop.update(pressed, source, self._clock() if stamp is None else stamp)
+
+    def request_set_pose(self, pose, covariance=None) -> concurrent.futures.Future:
+        """Ask the loop to set the odometry pose (x, y, yaw) [m, m, rad] and
+        its covariance (9 values, 3 x 3 row-major; None: zero). Safe during
+        motion: the odometry goes on from the new pose."""
+        return self._request("set_pose", (tuple(pose), covariance))
+
     def request_reset_odometry(self) -> concurrent.futures.Future:
         """Ask the loop to reset the odometry pose to the origin."""
         return self._request("reset_odometry", None)
@@ -242,7 +264,8 @@ class BaseController:
     def state(self) -> ControllerState:
         if self.fault is not None:
             return ControllerState.FAULT
-        return ControllerState.ARMED if self.driver.armed else ControllerState.DISARMED
+        return (ControllerState.ARMED if self.driver.armed and self._holding_since is None
+                else ControllerState.DISARMED)
 
     def command_age(self) -> float:
         """Seconds since the last command (inf if none)."""
@@ -276,7 +299,8 @@ class BaseController:
             range_limited=() if self.range_guard is None else
             self.range_guard.limited(self._clock(), DISARMED_COMMAND_WINDOW),
             unwind=None if self.maneuver is None else self.maneuver.status(),
-            unwinding=self.maneuver is not None and self.maneuver.result is None)
+            unwinding=self.maneuver is not None and self.maneuver.result is None,
+            estop=self.estop_reason, holding=self._holding_since is not None)
 
     # -- the cycle (loop thread) ----------------------------------------------------
     def step(self, take_command: Callable[[], None] | None = None) -> bool:
@@ -291,6 +315,7 @@ class BaseController:
         called on one whose invalid reading was dropped (safety.glitch_policy:
         that cycle commands from the last good reading)."""
         self.counters["cycles"] += 1
+        self._check_estop()
         self._process_requests()
         try:
             reading = self.driver.read()
@@ -341,10 +366,15 @@ class BaseController:
             self.saturation = 1.0
             return True
 
-        maneuver = None if self.maneuver is None else self.maneuver.target(
+        if self._holding_since is not None and self._hold_over():
+            return True
+        holding = self._holding_since is not None
+        maneuver = None if self.maneuver is None or holding else self.maneuver.target(
             self.odometry.pose, reading.positions, self._clock())
-        sample = None if maneuver is not None else self._trajectory_sample()
-        if maneuver is not None:
+        sample = None if maneuver is not None or holding else self._trajectory_sample()
+        if holding:
+            target = _ZERO3          # disarmed, holding: to rest and stay there
+        elif maneuver is not None:
             target = maneuver
         elif sample is None:
             target = self._target()
@@ -456,6 +486,10 @@ class BaseController:
                     result = self._arm() if arg else self._disarm()
                 elif kind == "unwind":
                     result = self._start_unwind()
+                elif kind == "set_pose":
+                    self.odometry.set_pose(*arg)
+                    x, y, yaw = arg[0]
+                    result = (True, f"odometry set to x {x:g} m, y {y:g} m, yaw {yaw:g} rad")
                 else:
                     self.odometry.reset()
                     self.slip_monitor.reset()
@@ -480,8 +514,11 @@ class BaseController:
         return result
 
     def _arm(self) -> tuple[bool, str]:
-        if self.driver.armed:
+        if self.estop_reason is not None:
+            return False, f"refused: {self.estop_reason}; release the emergency stop first"
+        if self.driver.armed and self._holding_since is None:
             return True, "already armed"
+        self._holding_since = None
         # A fault is cleared only if the driver answers again, plausibly.
         reading = self.driver.read()
         self.monitor.reset()
@@ -503,11 +540,50 @@ class BaseController:
         return True, "motors armed"
 
     def _disarm(self) -> tuple[bool, str]:
-        self.driver.deactivate()
-        self.twist_command = np.zeros(3)
         self._trajectory = None
         self.cancel_unwind("motors disarmed")
+        policy = self.disarm_policy
+        if policy.holds and self.driver.armed and self._holding_since is None:
+            # to rest under the deceleration limits, then zero velocity
+            self._holding_since = self._clock()
+            self._command = None
+            until = (f"for {policy.hold_time:g} s" if policy.hold_time > 0.0
+                     else "until disarmed again")
+            return True, f"motors disarmed; holding the base at rest {until}"
+        self._holding_since = None
+        self.driver.deactivate()
+        self.twist_command = np.zeros(3)
         return True, "motors disarmed"
+
+    def _hold_over(self) -> bool:
+        """End a hold whose safety.hold_time has run (idle the drives)."""
+        if not self.disarm_policy.hold_over(self._holding_since, self._clock()):
+            return False
+        self._holding_since = None
+        try:
+            self.driver.deactivate()
+        except DriverError as exc:
+            self._on_fault(exc)
+        self.twist_command = np.zeros(3)
+        self.joint_command[:] = 0.0
+        return True
+
+    def _check_estop(self) -> None:
+        """Quick-stop and disarm when the e-stop is (or becomes) pressed."""
+        reason = self.estop.reason(self._clock())
+        self.estop_reason = reason
+        if reason is None or not self.driver.armed:
+            return
+        self._holding_since = None
+        self._trajectory = None
+        self.cancel_unwind(f"emergency stop: {reason}")
+        self._command = None
+        self.twist_command = np.zeros(3)
+        self.joint_command[:] = 0.0
+        try:
+            self.driver.quick_stop()
+        except DriverError as exc:
+            self._on_fault(exc)
 
     def _on_fault(self, exc: DriverError) -> None:
         self.counters["driver_errors"] += 1
@@ -524,6 +600,7 @@ class BaseController:
         self.twist_command = np.zeros(3)
         self._trajectory = None
         self.cancel_unwind(f"fault: {reason}")
+        self._holding_since = None
         self.joint_command[:] = 0.0
         try:
             self.driver.deactivate()

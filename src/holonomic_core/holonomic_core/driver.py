@@ -11,7 +11,11 @@ Lifecycle (ros2_control's hardware interface, python-can's ``BusABC``)::
   disarms them; ``read`` works in INACTIVE and ACTIVE (odometry keeps running
   while disarmed), ``write_velocities`` only in ACTIVE;
 * ``close`` deactivates if needed and releases everything; a driver is a
-  context manager that closes on exit.
+  context manager that closes on exit;
+* ``quick_stop`` is the emergency stop: from ACTIVE the drives brake to rest
+  at their own quick-stop deceleration (CiA 402 quick stop, ODrive Estop or a
+  braking ramp, the simulator's speed loops at full torque) and the driver
+  ends INACTIVE, like ``deactivate``; ``activate`` arms again.
 
 All joint arrays are in the model's ``joint_names`` order, in joint units
 (rad, rad/s, N m) -- gear ratios, encoder counts and direction signs are the
@@ -153,6 +157,16 @@ class Driver(abc.ABC):
             finally:
                 self._state = DriverState.INACTIVE
 
+    def quick_stop(self) -> None:
+        """Emergency stop: brake every drive to rest (the backend's quick
+        stop, never a coast) and disarm. Safe to call in any state but
+        FINALIZED; a no-op unless ACTIVE."""
+        if self._state is DriverState.ACTIVE:
+            try:
+                self._on_quick_stop()
+            finally:
+                self._state = DriverState.INACTIVE
+
     def close(self) -> None:
         """Deactivate (if active) and release resources; idempotent."""
         if self._state is DriverState.FINALIZED:
@@ -215,6 +229,11 @@ class Driver(abc.ABC):
 
     def _on_deactivate(self) -> None:
         pass
+
+    def _on_quick_stop(self) -> None:
+        """Brake to rest and disarm. Backends whose ``_on_deactivate``
+        already brakes need not override it."""
+        self._on_deactivate()
 
     def _on_close(self) -> None:
         pass

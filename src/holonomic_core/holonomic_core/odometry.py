@@ -187,6 +187,19 @@ class Odometry:
         [(m/s)^2, (m/s)^2, (rad/s)^2] (model in :class:`OdometryNoise`)."""
         return np.diag(self._twist_var)
 
+    def set_pose(self, pose, covariance=None) -> None:
+        """Jump to ``pose`` (x, y, yaw) [m, m, rad] with ``covariance`` (9
+        values, the 3 x 3 of x, y, yaw row-major; None: zero) -- a pose from
+        localization (set_pose). The encoder reference, the twist and the
+        path length are kept: during motion the odometry goes on from the new
+        pose without losing or repeating a displacement."""
+        self.pose[:] = (float(pose[0]), float(pose[1]), wrap_angle(float(pose[2])))
+        if covariance is None:
+            self._P = (0.0,) * 6
+        else:
+            c = [float(v) for v in covariance]
+            self._P = (c[0], c[1], c[2], c[4], c[5], c[8])
+
     def rebase(self) -> None:
         """Keep the pose; take the next reading as the new encoder reference
         (after an implausible reading, or a gap in which the joints moved

@@ -339,15 +339,18 @@ def test_arm_twice_and_disarm_answer_the_request():
     assert ctrl.status().twist_command == (0.0, 0.0, 0.0)
     fut = ctrl.request_enable(False)
     run(ctrl, clock, 1)
-    assert fut.result(timeout=0) == (True, "motors disarmed")
+    # safety.disarm_mode hold (the default): disarmed, the drives hold still
+    assert fut.result(timeout=0) == (
+        True, "motors disarmed; holding the base at rest until disarmed again")
     assert ctrl.state is ControllerState.DISARMED
     assert ctrl.status().twist_command == (0.0, 0.0, 0.0)
 
 
 def test_disarming_a_saturated_base_reports_rest_and_no_scaling():
     # without the speed norm: the per-axis 1.2 m/s on a diagonal (1.7 m/s)
-    # is beyond the wheels' 1.23 m/s, so the joint speeds saturate
-    ctrl, driver, clock = make(**{"limits.linear.max_speed": 0.0})
+    # is beyond the wheels' 1.23 m/s, so the joint speeds saturate; coast:
+    # the drives idle at once (hold decelerates first: test_safety)
+    ctrl, driver, clock = make(**{"limits.linear.max_speed": 0.0, "safety.disarm_mode": "coast"})
     arm(ctrl, clock)
     drive(ctrl, clock, (1e308, 1e308, 0.0), 600)
     assert ctrl.status().saturation < 1.0

@@ -89,10 +89,15 @@ def test_torque_mode_writes_efforts_and_never_velocities():
     run(ctrl, clock, 5)
     kinds = [kind for kind, _ in driver.written]
     assert kinds == ["efforts"] * 6          # the arming cycle and five more
-    # disarmed: the cycle writes nothing
+    # disarmed with safety.disarm_mode hold (the default): the torque law
+    # holds the base at rest, still never a velocity
     ctrl.request_enable(False)
     run(ctrl, clock, 3)
-    assert len(driver.written) == 6
+    assert [kind for kind, _ in driver.written] == ["efforts"] * 9
+    # disarmed again: the drives idle, the cycle writes nothing
+    ctrl.request_enable(False)
+    run(ctrl, clock, 3)
+    assert len(driver.written) == 9
 
 
 def test_at_rest_on_its_reference_the_base_gets_no_torque():

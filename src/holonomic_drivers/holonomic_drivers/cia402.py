@@ -494,6 +494,7 @@ class Cia402Driver(CanDriver):
                 self._nodes[node_id] = node
             for node_id, joints in self._node_joints.items():
                 self._configure_device(node_id, joints)
+            self._read_quick_stop_options()
             for node in self._nodes.values():
                 node.nmt.send_command(co.NmtCommand.START)
             self._wait("first PDOs and heartbeats",
@@ -504,6 +505,35 @@ class Cia402Driver(CanDriver):
         except BaseException:
             self._disconnect()
             raise
+
+    def _read_quick_stop_options(self) -> None:
+        """Each axis's quick stop option code 0x605A (how it obeys the
+        emergency stop's quick stop command), for the status; a warning where
+        it coasts (0: power stage off at once) or cannot be read."""
+        self.quick_stop_options = []
+        for i, device in enumerate(self.devices):
+            option = None
+            if self._objects[i].has(co.QUICK_STOP_OPTION):
+                try:
+                    option = int(self._upload(i, co.QUICK_STOP_OPTION))
+                except (DriverError, canopen.SdoAbortedError) as exc:
+                    self.warnings.append(f"{device}: quick stop option code 0x605A not "
+                                         f"readable ({exc}): the drive's default applies")
+            else:
+                self.warnings.append(f"{device}: no quick stop option code 0x605A: the "
+                                     "emergency stop's quick stop does what the drive defaults to")
+            if option == 0:
+                self.warnings.append(f"{device}: quick stop option code 0x605A = 0 disables "
+                                     "the power stage at once: the emergency stop coasts "
+                                     "(1/2 ramp then disable, 5/6 ramp and hold)")
+            self.quick_stop_options.append(option)
+
+    def _on_quick_stop(self) -> None:
+        """The emergency stop: controlword QUICK STOP (0x0002) with a zero
+        target on every drive, then SYNC at once. Each drive brakes as its
+        0x605A says (on its quick stop deceleration 0x6085 for 2 and 6) and
+        then disables (1-4) or holds in QUICK STOP ACTIVE (5-8)."""
+        self._stop_all(Control.QUICK_STOP)
 
     def _download(self, i: int, index: int, sub: int, data: bytes) -> None:
         """One SDO write to joint ``i``'s device; a refusal (SdoRefused) names
@@ -714,6 +744,11 @@ class Cia402Driver(CanDriver):
     def _enable_drive(self, i: int) -> None:
         device = self.devices[i]
         state = self._sdo_state(i)
+        if state is State.QUICK_STOP_ACTIVE:
+            # after an emergency stop with 0x605A 5-8: out of it through
+            # disable voltage (shutdown is no transition from there)
+            self._write(i, co.CONTROLWORD, Control.DISABLE_VOLTAGE)
+            state = self._sdo_state(i)
         if state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
             # fault reset acts on the rising edge of bit 7
             self._write(i, co.CONTROLWORD, Control.DISABLE_VOLTAGE)
@@ -930,14 +965,15 @@ class Cia402Driver(CanDriver):
                                            PREFIX) from exc
         self.counters["frames_sent"] += 1
 
-    def _stop_all(self) -> None:
-        """Disable operation with zero targets on every drive, then SYNC now."""
+    def _stop_all(self, word: int = Control.SWITCH_ON) -> None:
+        """Controlword ``word`` (default: disable operation) with zero targets
+        on every drive, then SYNC now."""
         failure = None
         for i in range(len(self.devices)):
             try:
                 if self._in_torque[i]:
-                    self._send_torque(i, Control.SWITCH_ON, 0)
-                self._send_velocity(i, Control.SWITCH_ON, 0)
+                    self._send_torque(i, word, 0)
+                self._send_velocity(i, word, 0)
             except DriverCommunicationError as exc:
                 failure = failure or exc
         try:

@@ -299,6 +299,21 @@ class OdriveCanDriver(CanDriver):
     def _on_deactivate(self) -> None:
         self._idle_all()
 
+    def _on_quick_stop(self) -> None:
+        """The emergency stop. Firmware 0.6: ODrive's Estop message to every
+        axis (the axis disarms at once with ESTOP_REQUESTED -- power stage
+        off, the wheels coast to rest -- which the next activate's
+        Clear_Errors clears). Firmware 0.5: a braking ramp instead -- zero
+        velocity input, the axes stay in closed-loop control and brake at
+        their current limit (and ramp, input_mode VEL_RAMP) until the next
+        activate or close, or until their CAN watchdog idles them once no
+        feed arrives."""
+        for node in self.joints.node_ids:
+            if self.firmware == "0.6":
+                self._send(node, Cmd.ESTOP, b"")
+            else:
+                self._send(node, Cmd.SET_INPUT_VEL, proto.set_input_vel(0.0))
+
     def _on_close(self) -> None:
         self._shutdown_bus()
 

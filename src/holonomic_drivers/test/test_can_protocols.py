@@ -379,7 +379,9 @@ def test_cia402_driver_sends_the_scripted_frames():
             "23 02 18 01 82 03 00 80", "23 03 18 01 82 04 00 80",
             "40 61 60 00 00 00 00 00",      # read 0x6061 mode display
             "40 02 65 00 00 00 00 00",      # read 0x6502 supported drive modes
-            "40 76 60 00 00 00 00 00")]     # read 0x6076 rated torque
+            "40 76 60 00 00 00 00 00",      # read 0x6076 rated torque
+            # after every device's set-up: the quick stop option code
+            "40 5A 60 00 00 00 00 00")]     # read 0x605A (the e-stop's behaviour)
         assert _sdo_requests(frames, 2) == expected
 
         rig.driver.activate()

@@ -179,6 +179,13 @@ class DriveBank:
         self._target = [0.0] * self.n
         self._integral = [0.0] * self.n
 
+    def coast(self) -> None:
+        """Power stage off now: zero torque, no speed loop, loop reset."""
+        self._pending.clear()
+        self._torque_mode = True
+        self._target = [0.0] * self.n
+        self._integral = [0.0] * self.n
+
     def _push(self, torque_mode: bool, values: list[float]) -> None:
         if len(values) != self.n:
             raise ValueError(f"{self.n} joint values expected, got {len(values)}")

@@ -35,6 +35,8 @@ drive.*             ...     the drive model (see :func:`drive_specs`)
 gui                 --      open the pybullet GUI instead of DIRECT mode
 start_pose          m, rad  (x, y, yaw) of base_link in the world at start
 physics_process     --      step the physics in a process of its own, on the wall clock
+floor_tilt          deg     the floor rises along world +x by this angle (a ramp)
+holding_brakes      --      disabled drives brake the joints (false: they turn freely)
 ================== ======= ============================================================
 
 With ``sim.physics_process: true`` the world lives in a process of its own
@@ -128,7 +130,7 @@ class InProcessPlant:
         self.robot.command_velocities(np.zeros(len(self._reading_offset)))
 
     def hold(self) -> None:
-        self.robot.hold()
+        self.robot.idle()
 
     def command_velocities(self, velocities: np.ndarray) -> None:
         self.robot.command_velocities(velocities)
@@ -265,6 +267,16 @@ class SimDriver(Driver):
                       "holonomic-drive-test asks of a real robot); ground truth stays at "
                       "the start.",
                       default=False),
+            ParamSpec("sim.floor_tilt", "double",
+                      "Slope of the floor [deg]: a ramp rising along the world's +x axis (a "
+                      "rotation about world y; negative: falling along +x), so a base at "
+                      "sim.start_pose yaw 0 faces uphill. Modelled by tilting gravity.",
+                      default=0.0, minimum=-30.0, maximum=30.0),
+            ParamSpec("sim.holding_brakes", "bool",
+                      "The simulated joints have holding brakes: disabled drives (disarmed, "
+                      "safety.disarm_mode coast, a fault) brake them. false: disabled drives "
+                      "let them turn freely (an ODrive or CiA 402 drive without a brake: a "
+                      "base on a ramp rolls).", default=True),
             ParamSpec("sim.physics_process", "bool",
                       "Step the physics (pybullet and the drive model) in a process of its own "
                       "on the wall clock instead of inside each read: the control loop writes "
@@ -311,11 +323,16 @@ class SimDriver(Driver):
                 if abs(shared.dt * self.physics_rate - 1.0) > 1e-9:
                     raise ConfigError("sim.physics_rate", self.physics_rate,
                                       f"the shared world's rate ({1 / shared.dt:g} Hz)")
+                if shared.floor_tilt != p["sim.floor_tilt"]:
+                    raise ConfigError("sim.floor_tilt", p["sim.floor_tilt"],
+                                      f"the shared world's tilt ({shared.floor_tilt:g} deg)")
                 world = shared
             else:
-                world = SimWorld(self.physics_rate, gui=p["sim.gui"])
+                world = SimWorld(self.physics_rate, gui=p["sim.gui"],
+                                 floor_tilt=p["sim.floor_tilt"])
             robot = world.add_robot(body_model, Pose2D(*start), friction, drive,
                                     drive_rng, lifted=p["sim.lifted"])
+            robot.holding_brakes = bool(p["sim.holding_brakes"])
         except SimError as exc:
             if world is not None and shared is None:
                 world.close()
@@ -395,6 +412,12 @@ class SimDriver(Driver):
 
     def _on_deactivate(self) -> None:
         self._plant.hold()
+
+    def _on_quick_stop(self) -> None:
+        # the drives' speed loops to zero at full torque, then held there
+        # (CiA 402 quick stop options 5-8: stay in QUICK STOP ACTIVE) until
+        # the next activate; braked, never coasting
+        self._plant.command_velocities(np.zeros(len(self.model.joint_names)))
 
     def _on_close(self) -> None:
         if self._plant is not None:         # None: configure failed

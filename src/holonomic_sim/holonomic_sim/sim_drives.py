@@ -233,6 +233,9 @@ class SimDrivesDriver(Driver):
     def _on_deactivate(self) -> None:
         self.can.deactivate()
 
+    def _on_quick_stop(self) -> None:
+        self.can.quick_stop()
+
     def _on_close(self) -> None:
         self._shutdown()
 

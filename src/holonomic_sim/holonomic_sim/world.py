@@ -75,6 +75,8 @@ class SimRobot:
         self.model = model
         self.start = start
         self.lifted = lifted
+        #: whether the disabled drives' joints are braked (idle) or free
+        self.holding_brakes = True
         cid = self._client = world.client
         urdf = generate_urdf(model)
         with tempfile.TemporaryDirectory(prefix="holonomic_sim_") as tmp:
@@ -302,6 +304,24 @@ class SimRobot:
             return
         self.command_velocities(np.zeros(len(self.joint_indices)))
 
+    def idle(self) -> None:
+        """The drives disabled (disarmed): :meth:`hold` with holding brakes
+        (``holding_brakes``, sim.holding_brakes), else :meth:`coast`."""
+        if self.holding_brakes:
+            self.hold()
+        else:
+            self.coast()
+
+    def coast(self) -> None:
+        """Power stage off, no brake: every joint free but for its friction
+        (a real drive's idle without a holding brake; a base on a ramp rolls)."""
+        n = len(self.joint_indices)
+        if self.drives is not None:
+            self.drives.coast()
+            self._release_brakes()
+            return
+        self.command_efforts(np.zeros(n))
+
     def before_step(self) -> None:
         # TORQUE_CONTROL forces last one simulation step in pybullet.
         if self.drives is not None:
@@ -431,15 +451,22 @@ class SimRobot:
 class SimWorld:
     """A physics server with a flat floor, stepped at ``physics_rate`` [Hz]."""
 
-    def __init__(self, physics_rate: float = 1000.0, gui: bool = False):
+    def __init__(self, physics_rate: float = 1000.0, gui: bool = False,
+                 floor_tilt: float = 0.0):
+        """``floor_tilt`` [deg]: the floor is a ramp rising along world +x by
+        this angle (about world y; negative: falling). Modelled by tilting
+        gravity instead of the plane -- the same physics on an endless floor --
+        so poses and ground truth stay in the floor's plane."""
         self.dt = 1.0 / physics_rate
+        self.floor_tilt = float(floor_tilt)
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
         if self.client < 0:
             raise SimError("pybullet could not connect"
                            + (" to a GUI (is there a display?)" if gui else ""))
         cid = self.client
         pb.resetSimulation(physicsClientId=cid)
-        pb.setGravity(0.0, 0.0, -9.81, physicsClientId=cid)
+        tilt = math.radians(self.floor_tilt)
+        pb.setGravity(-9.81 * math.sin(tilt), 0.0, -9.81 * math.cos(tilt), physicsClientId=cid)
         pb.setTimeStep(self.dt, physicsClientId=cid)
         pb.setRealTimeSimulation(0, physicsClientId=cid)
         floor = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid)

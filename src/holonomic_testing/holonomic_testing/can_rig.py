@@ -71,8 +71,10 @@ class CanRig:
         self._folder = tempfile.mkdtemp(prefix="holonomic-can-")
         #: the bus: the hub's socket in the drives' process
         self.channel = os.path.join(self._folder, "bus")
+        # coast: a disarm request reaches the driver's disarm frames at once
+        # (safety.disarm_mode hold would keep the drives at zero velocity)
         params = {"driver": backend, f"{backend}.interface": "holonomic_ipc",
-                  f"{backend}.channel": self.channel}
+                  f"{backend}.channel": self.channel, "safety.disarm_mode": "coast"}
         params.update(overrides)
         self.config = load_config(robot, params)
         self.model = self.config.model
