@@ -150,9 +150,10 @@ CASES = [
             "min_position: -6.2832\n\\1max_position: one turn"),
      "joints.turret_joint.max_position", "a number"),
     ("joint range on a wheel joint",
-     mutate_xr(r"front_left_wheel_joint: \{max_velocity: 24.0, max_effort: 6.0\}",
+     mutate_xr(r"front_left_wheel_joint: \{max_velocity: 24.0, max_effort: 6.0, "
+               r"max_acceleration: 500.0\}",
                "front_left_wheel_joint: {max_velocity: 24.0, max_effort: 6.0, "
-               "min_position: -3.0, max_position: 3.0}"),
+               "max_acceleration: 500.0, min_position: -3.0, max_position: 3.0}"),
      "joints.front_left_wheel_joint.min_position", "continuous"),
     ("misspelt section", mutate(r"^    ddrot:", "    ddrott:"),
      "ddrott.wheel_radius", "did you mean 'ddrot.wheel_radius'? Known sections: "),
