@@ -353,12 +353,6 @@ def final_errors(rec: Recording) -> Trial:
     return trial
 
 
-def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
-              area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0) -> Trial:
-    """One random run and return; the final error of every estimator."""
-    return final_errors(record_run(robot, condition, seed, duration, area, speed, acceleration))
-
-
 def summarize(trials: list[Trial]) -> str:
     """The table: per condition and estimator, mean/median errors, ratios to
     pinv and in how many runs the estimator ended closer than pinv."""
