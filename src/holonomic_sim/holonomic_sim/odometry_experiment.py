@@ -267,7 +267,7 @@ def record_run(robot: str, condition: str, seed: int, duration: float = 60.0,
     settings."""
     return simulate(robot, seed, duration, area, speed, acceleration,
                     {**CONDITIONS[condition], **(overrides or {})}, calibration, condition,
-                    motion)
+                    motion=motion)
 
 
 def recording_path(folder: str, robot: str, condition: str, seed: int, duration: float,
