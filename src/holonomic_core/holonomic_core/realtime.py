@@ -82,7 +82,7 @@ def warm_up_linear_algebra() -> None:
     don't need it; ``A.T @ A`` (syrk) or an LU solve do. Under
     ``mlockall(MCL_FUTURE)`` (:func:`lock_memory`) that mapping is faulted in
     and locked page by page inside the call: 8192 minor faults and 10-37 ms
-    of CPU (the longer as a fresh process's first call), against 0.15 ms
+    of CPU (more as a fresh process's first call than inside the loop), against 0.15 ms
     unlocked -- ten or more 1 ms cycles' worth. In the loop, the first such
     call is the PCV's drift watch's first batch, about 2 s after the base
     first moves, where it would show as a 12-17 ms "controller" part
