@@ -73,7 +73,7 @@ def loop_at_1khz(seconds: float = 60.0, robot: str = "hamr") -> dict:
             **_measure_loop([robot, "--driver", "mock"], "bench_loop", "loop", seconds)}
 
 
-#: the 1 kHz rows of issue 24: robot, bringup arguments, what it is
+#: the 1 kHz loop rows of the benchmark page: robot, bringup arguments, what it is
 LOOP_1KHZ_CASES = (
     ("hamr", ["hamr", "--driver", "mock"], "hamr, mock driver"),
     ("xr4000_torque", ["xr4000", "--driver", "sim", "-p", "control_mode:=torque",

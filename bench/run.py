@@ -351,14 +351,12 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     asks the normal scheduler for a 0.1 ms time slice (`loop.slice`, Linux 6.12+), so its
     wake-ups preempt those processes instead of waiting for their 1.4 ms slices to end; the
     node publishes its three 1 kHz topics as pre-serialized messages (about 40 % less CPU
-    per cycle). The 16:37 rows have both (idle, against the 14:01 rows without them: HAMR
-    p99 1.603 -> 1.464 ms, max 7.0 -> 4.9 ms, periods over 5 ms 1 -> 0; docs/realtime.md
-    has their A/B on the loaded machine: wake-up lateness p99 cut by 43-74 % in seven pairs
-    of eight). What a
+    per cycle); `python bench/ros_loop.py slice-ab` measures the slice's effect on the
+    wake-up lateness, with and without it in alternating blocks (docs/realtime.md). What a
     slice cannot change: the loop's share of the CPU when other processes want more
-    than two cores, and this VM's kernel, which is not preemptible (`Dynamic Preempt:
-    none` at boot): a wake-up waits until the running process leaves the kernel;
-  * *with SCHED_FIFO* on that kernel, in a VM shared with other real-time loops of the
+    than two cores, and a kernel that is not preemptible (`Dynamic Preempt: none` at
+    boot): a wake-up waits until the running process leaves the kernel;
+  * *with SCHED_FIFO* on such a kernel, on a machine shared with other real-time loops of the
     same priority (the other runs' loop processes): a few periods over 2 ms a minute,
     woken late, for the same reason or behind those loops; 50-52 ms preemptions are the
     kernel's real-time throttling (950 ms of real-time per second, `sched_rt_runtime_us`);
@@ -367,9 +365,9 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     rows) the physics runs in a process of its own (SCHED_FIFO 49 below a real-time loop), as
     the plant does on a robot, and the cycle is the operational-space torque law (33 µs a call
     with its dynamics compiled, 83 µs on the pure-Python path: `python bench/torque_law.py`).
-    The 12-17 ms `compute` spike these rows had once or twice a minute is gone: numpy's BLAS
-    mapped its 32 MiB work buffer in the drift watch's first batch, 8192 page faults under
-    mlockall inside one cycle; the loop process now sets BLAS up before its first cycle, works
+    numpy's BLAS maps a 32 MiB work buffer on first use (8192 page faults under mlockall,
+    a 12-17 ms `compute` spike if that lands inside a cycle, as the drift watch's first batch
+    would); the loop process sets BLAS up before its first cycle, works
     a drift batch off over four cycles, and runs its once-a-second status and collector in
     different cycles (docs/realtime.md; the loop's status keeps its page faults and its slowest
     cycle with its parts: `slowest_*` in the split). With SCHED_FIFO the remaining periods over
@@ -384,9 +382,9 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     before the control law (`BaseController.step(take_command)`), not at the start of the
     cycle. So the end-to-end p50 is about DDS one-way + 0.04 ms + 0.5 ms, and **the floor
     of a fixed-period 1 kHz loop is DDS one-way + half a period**: the ratio can reach 2×
-    only where DDS one-way is above about 0.55 ms. On this machine DDS one-way p50 has
-    measured 0.35-0.97 ms from run to run (floors of 1.5-2.5×), so the verdict of the row
-    above holds for its run only: earlier runs gave 2.03-2.4×. Running an extra control cycle when a command arrives would
+    only where DDS one-way is above about 0.55 ms. On a shared machine DDS one-way p50 varies
+    from run to run (0.35-0.97 ms, floors of 1.5-2.5×), so the verdict of the row above holds
+    for its run only. Running an extra control cycle when a command arrives would
     remove the wait and break the fixed period the limiter, the odometry, the torque law
     and the drives' SYNC and watchdogs are built on; it is not done;
   * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz; on a loaded

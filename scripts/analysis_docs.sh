@@ -36,7 +36,7 @@ for d in 1.0 0.3 0.1 0.03; do
 done
 run holonomic-analyze xr4000 --measure --kinematic
 run holonomic-analyze comr3 --measure --kinematic
-# measured holonomicity in the simulator (ideal motors, as first measured), the configured limits
+# measured holonomicity in the simulator (ideal velocity motors instead of the drive model), the configured limits
 run holonomic-analyze hamr --measure -p sim.ideal_motors:=true --heading-changes 0,1.570796,-1.570796,3.141593 --plot "$OUT"
 run holonomic-analyze xr4000 --measure -p sim.ideal_motors:=true --heading-changes 0,1.570796,-1.570796,3.141593 --plot "$OUT"
 run holonomic-analyze comr3 --measure -p sim.ideal_motors:=true --heading-changes 0,1.570796,-1.570796,3.141593 --plot "$OUT"

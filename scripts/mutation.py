@@ -9,8 +9,8 @@ when the run is interrupted.
 
 Why not `mutmut run`: it starts a new Python and pytest for every mutant
 (numpy, the ROS message modules the test plugin imports, collection) and runs
-all the module's tests each time: 3-13 mutants a minute on the shared 2-core
-machine, so no module finished within a session. This runner does the same
+all the module's tests each time: a few mutants a minute on two shared
+cores, hours for one module. This runner does the same
 mutations and counts the same way, but
 
 * runs only the tests that execute the mutated line: one pytest run under

@@ -105,11 +105,6 @@ def _index(M, m, k, lengths) -> np.ndarray:
     return np.sqrt(np.maximum(ev[:, 0], 0.0) / ev[:, -1])
 
 
-def index_at(kin, steer, length: float) -> float:
-    """Isotropy index sigma_min/sigma_max of Z at characteristic length [m]."""
-    return float(_index(*_gram(kin, steer), [length])[0])
-
-
 @dataclass(frozen=True)
 class Isotropy:
     """Isotropy of one configuration.

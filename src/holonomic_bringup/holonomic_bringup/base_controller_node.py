@@ -396,11 +396,6 @@ class BaseControllerNode(Node):
         """Why this robot's control loop is not running (None while it runs)."""
         return None if self.link is None else self.link.client.lost
 
-    def latest_record(self):
-        """The loop's latest state record (``loop_wire.StateRecord``; None
-        before the first): odometry, joints, command of one cycle."""
-        return self._latest
-
     def _wait(self, future):
         try:
             return future.result(timeout=_SERVICE_TIMEOUT)

@@ -45,11 +45,11 @@ import numpy as np
 from holonomic_bringup import loop_wire as wire
 
 #: how long before each deadline the loop stops sleeping and busy-waits [s].
-#: Measured (bench/ros_loop.py, hamr at 1 kHz, SCHED_FIFO, timer slack 1 µs,
-#: 2-core VM): sleeping to the deadline wakes p99 54 µs late; 200 µs of
-#: spinning held p99 1.001 ms but burnt 20 % of a core at real-time priority
-#: (the core DDS and the node share, and real-time time the kernel throttles
-#: at 95 %); 60 µs covers the usual lateness for 6 %.
+#: At 1 kHz under SCHED_FIFO with a 1 µs timer slack, a sleep to the deadline
+#: wakes about 50 µs late (p99; bench/ros_loop.py shows it); 200 µs of
+#: spinning holds the period to p99 1.001 ms but burns 20 % of a core at
+#: real-time priority (the core DDS and the node share, and real-time time
+#: the kernel throttles at 95 %); 60 µs covers the usual lateness for 6 %.
 LOOP_SPIN = 6e-5
 #: consecutive failed cycles after which the loop gives up (motors stay off)
 MAX_CONSECUTIVE_ERRORS = 50
@@ -255,7 +255,7 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     # The once-a-second work in different cycles, never stacked in one: each
     # robot's status at its own phase of the second, the collector halfway
     # between the first two (status 0.5-0.7 ms, gc 0.1-0.3 ms: together with
-    # a slow control step they overran the 1 ms period, idle bench 18:57)
+    # a slow control step they would overrun the 1 ms period)
     diag_every = robots[0].diag_every
     for r in robots:
         r.status_phase = (r.index * r.diag_every) // len(robots)
@@ -386,8 +386,8 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     # The first status costs 10-25 ms (numpy's percentile and pickle set
     # themselves up on first use): pay it here, not in the cycle a second in.
     # So is numpy's BLAS work buffer: mapped by the first matrix product
-    # that needs it, 10-37 ms under mlockall. In the PCV's drift watch that
-    # was the cycle 2 s after the base first moved.
+    # that needs it, 10-37 ms under mlockall; otherwise the PCV's drift watch
+    # would pay it in a cycle about 2 s after the base first moves.
     warm_up_linear_algebra()
     warm = LoopStats(window=2)
     warm.add(0.0, 0.0)

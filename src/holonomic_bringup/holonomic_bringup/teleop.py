@@ -58,7 +58,7 @@ ENABLE_KEYS = {"A": True, "d": False, "D": False}
 #: key -> press (True) / release (False) the emergency stop; release takes Shift
 ESTOP_KEYS = {"s": True, "S": True, "R": False}
 #: seconds after start before an absent subscriber is reported (DDS discovery
-#: takes up to ~2.5 s on one machine)
+#: can take up to about 2.5 s)
 DISCOVERY_GRACE = 3.0
 #: Ctrl-C and Ctrl-D arrive as characters in raw mode
 QUIT_KEYS = {"\x03", "\x04"}

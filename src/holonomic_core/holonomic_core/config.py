@@ -39,7 +39,7 @@ from holonomic_core.driver import driver_class, driver_names, sim_drives_driver
 from holonomic_core.kinematics import ESTIMATORS, BaseKinematics, kinematics_class
 from holonomic_core.joint_range import checked_range, range_specs
 from holonomic_core.loop import LOOP_SPECS
-from holonomic_core.model import JointLimits, RobotModel
+from holonomic_core.robot_model import JointLimits, RobotModel
 from holonomic_core.monitor import MonitorLimits
 from holonomic_core.odometry import OdometryNoise
 from holonomic_core.safety import SAFETY_SPECS

@@ -403,8 +403,8 @@ class BaseController:
                 # the reference is the limited, saturated twist; the monitor
                 # checks the joints against its joint rates as in velocity mode
                 # feedback from the last interval's twist: the published,
-                # windowed one lags by half its window (measured: 3x the
-                # XR4000's slip in torque mode with the 30 ms window)
+                # windowed one lags by half its window, and with the 30 ms
+                # window that lag triples the XR4000's slip in torque mode
                 efforts = self.torque.step(reading.positions, self.odometry.pose,
                                            self.odometry.rate_twist, twist * scale, self.dt)
                 self.driver.write_efforts(efforts)

@@ -187,8 +187,8 @@ def wheel_shapes(radius: float, width: float) -> str:
 
     A rigid flat cylinder on a rigid floor touches at one rim edge as soon as
     the base rolls by any angle, so the contact jumps by +-width/2 across the
-    axle: with HAMR's 3 cm wheels that changed the effective track by up to
-    9 % and the heading odometry with it (measured while strafing). A real
+    axle: with HAMR's 3 cm wheels that changes the effective track by up to
+    9 % while strafing, and the heading odometry with it. A real
     tyre is crowned and compliant, its contact stays under the wheel centre;
     a thin implicit cylinder keeps the contact within +-_CROWN/2 of it.
     """

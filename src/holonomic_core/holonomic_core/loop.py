@@ -1,9 +1,9 @@
 """A fixed-rate loop in its own thread, paced by absolute deadlines.
 
-rclpy timers drop missed ticks and jitter by milliseconds under load (on the
-2-core development machine a ``create_timer(0.001)`` in a single-threaded
-executor ran at ~975 Hz with a p99 period of 1.1-3 ms, ~740 Hz once the
-executor also published and subscribed); a thread that sleeps to absolute
+rclpy timers drop missed ticks and jitter by milliseconds under load (a
+``create_timer(0.001)`` in a single-threaded executor runs at ~975 Hz with a
+p99 period of 1.1-3 ms, ~740 Hz once the executor also publishes and
+subscribes); a thread that sleeps to absolute
 deadlines ``t0 + k T`` (and busy-waits the last ``spin`` seconds) holds
 1 kHz (p99 period 1.00-1.03 ms; ``make bench`` measures this loop in the
 base controller under traffic, docs/benchmarks.md). If a cycle overruns
@@ -50,8 +50,8 @@ LOOP_SPECS: list[ParamSpec] = [
               "(the drives' own watchdogs stop the motors; the simulation stops with it) "
               "and reports an ERROR in diagnostics [s]. Default 2 s: far beyond any "
               "drive's command watchdog, and long enough that a loop without real-time "
-              "priority starved on an overloaded machine is not taken for hung (0.5 s "
-              "happened on the 2-core development machine at load 16).",
+              "priority starved on an overloaded machine is not taken for hung (such a "
+              "loop can stall for half a second).",
               default=2.0, minimum=0.01, maximum=60.0),
 ]
 
@@ -96,8 +96,9 @@ class LoopStats:
     parts and the page faults it took, so that a rare spike can be traced
     from the diagnostics alone. The minor page faults of all cycles are
     counted too: under mlockall a cycle should take none, and a fault means
-    something mapped memory inside the cycle (numpy's BLAS buffer did, for
-    10-37 ms, docs/realtime.md).
+    something mapped memory inside the cycle (numpy's BLAS work buffer would,
+    for 10-37 ms, were it not set up before the first cycle:
+    :func:`holonomic_core.realtime.warm_up_linear_algebra`).
     """
 
     def __init__(self, window: int = 2000):

@@ -81,11 +81,11 @@ def warm_up_linear_algebra() -> None:
     call that needs one and then keeps it. Products of 2x2 and 3x3 matrices
     don't need it; ``A.T @ A`` (syrk) or an LU solve do. Under
     ``mlockall(MCL_FUTURE)`` (:func:`lock_memory`) that mapping is faulted in
-    and locked page by page inside the call. Measured on the 2-core VM: 8192
-    minor faults and 10-37 ms of CPU (10-16 ms in the loop, 23-37 ms as a
-    fresh process's first call), against 0.15 ms unlocked. In the
-    loop, that call was the PCV's drift watch's first batch, about 2 s after
-    the base first moved: the XR4000's 12-17 ms "controller" spike
+    and locked page by page inside the call: 8192 minor faults and 10-37 ms
+    of CPU (more as a fresh process's first call than inside the loop), against 0.15 ms
+    unlocked -- ten or more 1 ms cycles' worth. In the loop, the first such
+    call is the PCV's drift watch's first batch, about 2 s after the base
+    first moves, where it would show as a 12-17 ms "controller" part
     (docs/realtime.md). The first SVD also sets itself up (about 1 ms more).
     Each routine here is one the cycle can reach: the drift watch's ``J.T @ J``,
     ``pinv`` and ``solve``, the torque law's ``pinv`` distribution, and the

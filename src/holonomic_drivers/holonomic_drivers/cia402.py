@@ -345,10 +345,11 @@ class Cia402Driver(CanDriver):
         self._sync_time = -math.inf
         #: (wall clock, driver clock) [s] of the SYNCs sent over the last
         #: SYNC_RECORD seconds, newest last: an answer handled after a stall of
-        #: this thread must still find the SYNC it answers (16 SYNCs, 80 ms
-        #: at 200 Hz, were shorter than a 0.2 s feedback_timeout allows, and
-        #: shorter than the 50 ms default at 1 kHz: such an answer was stamped
-        #: with the newest SYNC, a stall late, and read as an encoder glitch)
+        #: this thread must still find the SYNC it answers (a fixed 16 SYNCs,
+        #: 80 ms at 200 Hz, would be shorter than a 0.2 s feedback_timeout
+        #: allows, and shorter than the 50 ms default at 1 kHz: such an answer
+        #: would be stamped with the newest SYNC, a stall late, and read as an
+        #: encoder glitch)
         self._syncs: deque[tuple[float, float]] = deque(
             maxlen=max(16, math.ceil(SYNC_RECORD * control_rate)))
         #: the last reading returned (a cycle with nothing new repeats it)

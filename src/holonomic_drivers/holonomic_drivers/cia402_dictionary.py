@@ -317,10 +317,3 @@ def generic_dictionary(node_id: int | None = None, *, axes: int = 1,
         add(_var(co.SUPPORTED_MODES + o, 0, "Supported drive modes", u32, "const",
                  supported_modes))
     return od
-
-
-def velocity_units_per_rev_s(si_unit: int, counts_per_rev: float) -> tuple[str, float]:
-    """(name, velocity units per motor rev/s) of a 0x60A9 value; raises
-    KeyError for units the driver does not know."""
-    name, per_rev_s = SI_VELOCITY_UNITS[si_unit]
-    return name, counts_per_rev if per_rev_s is None else per_rev_s

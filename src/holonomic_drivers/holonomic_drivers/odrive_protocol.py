@@ -161,10 +161,6 @@ def set_input_torque(torque: float) -> bytes:
     return struct.pack("<f", torque)
 
 
-def set_limits(vel_limit_rev_per_s: float, current_limit: float) -> bytes:
-    return struct.pack("<ff", vel_limit_rev_per_s, current_limit)
-
-
 def clear_errors(identify: bool = False, firmware: str = "0.6") -> bytes:
     """0.6.x: one byte, Identify (blink the LED); 0.5.x: no payload."""
     return b"" if firmware == "0.5" else struct.pack("<B", int(identify))

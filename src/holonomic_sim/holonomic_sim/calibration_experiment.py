@@ -50,7 +50,7 @@ FAULTS = {
 # On the simulator's default drive model the readings are feedback_delay old
 # and stamped with their sample time; the ground truth comes at that stamp.
 CALIBRATION_DRIVE = {"pcv": {"control_mode": "torque"}, "ddrot": {}}
-#: the issue's targets: relative error of lengths, absolute error of zeros [rad]
+#: the calibration's targets: relative error of lengths, absolute error of zeros [rad]
 TARGETS = {("pcv", "radius"): 0.002, ("pcv", "offset"): 0.02, ("pcv", "zero"): math.radians(0.2),
            ("ddrot", "radius"): 0.003, ("ddrot", "length"): 0.003,
            ("ddrot", "zero"): math.radians(0.2)}

@@ -38,7 +38,7 @@ from holonomic_core.config import load_config
 from holonomic_core.se2 import relative_pose
 from holonomic_sim.odometry_experiment import final_errors, simulate
 
-#: the worn robot: the issue's example, +-2 % tyres, +-2 % caster offsets
+#: the worn robot: +-2 % tyres, +-2 % caster offsets
 #: (PCV) or wheel separation (DDROT), +-0.03 rad (1.7 deg) steering / turret zeros
 WORN = {
     "pcv": {"sim.wheel_radius_spread": 0.02, "sim.caster_offset_spread": 0.02,
@@ -51,9 +51,9 @@ ROUTES = {"pcv": ("ground_truth", "distance"), "ddrot": ("ground_truth", "tape")
 #: the calibration drive of the distance route ends here (odom [m, m, rad]).
 #: --distance scales the geometry until the odometry's end point spans the
 #: measured distance, so the drive's own odometry drift d (slip over the whole
-#: drive) becomes a scale error of about d / distance: ending 2 m away the
-#: scale came out 1.4 % low (seed 1: calibrated 41.6 mm on the check path,
-#: uncalibrated 31.1 mm), 8 m away 0.19 % high (5.4 mm, nominal 8.1 mm)
+#: drive) becomes a scale error of about d / distance: ending 2 m away that
+#: error is over 1 %, enough to leave the check path worse than uncalibrated;
+#: 8 m away it is about 0.2 %, well below the geometry errors it corrects
 DISTANCE_FINISH = (8.0, 0.0, 0.0)
 #: the check path's seed is this plus the fault seed: a path no calibration drove
 PATH_SEED_OFFSET = 1000

@@ -470,7 +470,7 @@ def fit(samples: Samples, start: OdometryNoise, predictive: bool = True) -> Odom
                    twist_lag_gain=tuple(coeffs[:, 2].tolist()))
 
 
-#: the coverage band the issue asks of every floor (the 95 % region must hold
+#: the coverage band every floor must reach (the 95 % region must hold
 #: the truth this often): below it the odometry is over-confident, above it
 #: a fusion filter gives the wheels less weight than they deserve
 BAND = (0.90, 0.995)

@@ -267,7 +267,7 @@ def record_run(robot: str, condition: str, seed: int, duration: float = 60.0,
     settings."""
     return simulate(robot, seed, duration, area, speed, acceleration,
                     {**CONDITIONS[condition], **(overrides or {})}, calibration, condition,
-                    motion)
+                    motion=motion)
 
 
 def recording_path(folder: str, robot: str, condition: str, seed: int, duration: float,
@@ -351,12 +351,6 @@ def final_errors(rec: Recording) -> Trial:
         trial.position_error[estimator] = float(np.linalg.norm(odo.pose[:2] - path[-1, :2]))
         trial.heading_error[estimator] = abs(wrap_angle(odo.pose[2] - path[-1, 2]))
     return trial
-
-
-def run_trial(robot: str, condition: str, seed: int, duration: float = 60.0,
-              area=(1.5, 2.5), speed: float = 1.25, acceleration: float = 2.0) -> Trial:
-    """One random run and return; the final error of every estimator."""
-    return final_errors(record_run(robot, condition, seed, duration, area, speed, acceleration))
 
 
 def summarize(trials: list[Trial]) -> str:

@@ -54,8 +54,8 @@ step below the loop (``loop.priority - 1``), otherwise it stays SCHED_OTHER
 like the loop. Below: it never preempts the loop. Real-time at all: a plant
 starved by the ROS node, DDS or other load stops the readings, and the
 controller faults after ``safety.reading_timeout`` (50 ms) as it would on a
-silent drive -- measured on the loaded 2-core machine at SCHED_OTHER. It
-costs 13-27 % of a core (XR4000, 1 kHz, measured), so the node and DDS keep
+silent drive -- which a plant at SCHED_OTHER on a loaded machine does. It
+costs 13-27 % of a core (XR4000, 1 kHz), so the node and DDS keep
 the rest and the real-time budget (95 % of each second) is far off.
 """
 

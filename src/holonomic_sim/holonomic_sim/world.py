@@ -345,7 +345,7 @@ class SimRobot:
         self.drives.record_states(states)
         if self._base_history is not None:
             # two calls per physics step, only with a delay: ~4 us together,
-            # against ~100 us for an XR4000 drive-model step (measured loaded)
+            # against ~100 us for an XR4000 drive-model step
             self._base_history.append((_base_pose(self.body, physicsClientId=self._client),
                                        _base_velocity(self.body, physicsClientId=self._client)))
 

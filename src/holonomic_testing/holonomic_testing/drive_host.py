@@ -42,7 +42,8 @@ from typing import Any
 _PLAIN = (type(None), bool, int, float, complex, str, bytes, tuple, list, dict, set,
           frozenset, enum.Enum)
 #: how long the child may take to import, build the drives and start [s]
-#: (measured: 0.3-0.6 s idle; a starved start at load 15 takes seconds)
+#: (well under a second on an idle machine; a start starved of CPU can take
+#: seconds, and a slow start is not a failure)
 START_TIMEOUT = 60.0
 
 
