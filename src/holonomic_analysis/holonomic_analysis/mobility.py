@@ -323,7 +323,8 @@ def analyze_rolling(model, positions, max_speed: float = math.inf) -> dict:
         "max_speed": max_speeds,
         "constant_heading_speed": {"slowest": slowest, "fastest": fastest},
         "speed_limit": None if math.isinf(max_speed) else float(max_speed),
-        "orientation_bias": float(S[1, 2] / S[1, 1]),
+        # 0 (not a rounding's -0.000) for a geometry symmetric about base_link x
+        "orientation_bias": float(S[1, 2] / S[1, 1]) if abs(S[1, 2]) > 1e-12 * S[1, 1] else 0.0,
         "ellipsoid_semi_axes": [float(v) for v in np.sqrt(np.linalg.eigvalsh(S))[::-1]],
         "instantaneous": instantaneous,
     }

@@ -73,6 +73,7 @@ def _null_space(M: np.ndarray) -> np.ndarray:
     _, s, vt = np.linalg.svd(M)
     rank = int(np.sum(s > RANK_TOL * max(s.max(initial=0.0), 1.0)))
     basis = vt[rank:].T
+    basis[np.abs(basis) < 1e-12] = 0.0
     for j in range(basis.shape[1]):         # a fixed sign: the first non-zero entry > 0
         k = int(np.argmax(np.abs(basis[:, j]) > RANK_TOL))
         if basis[k, j] < 0:
@@ -137,7 +138,7 @@ class RollingConstraints:
         the configuration (0: at most one direction of translation)."""
         translations = _null_space(np.vstack([self.constraint, [0.0, 0.0, 1.0]]))
         out = {"mobility_dimension": self.dimension,
-               "mobility_basis": [[float(v) + 0.0 for v in col] for col in self.basis.T],
+               "mobility_basis": [[float(v) for v in col] for col in self.basis.T],
                "ellipsoid_semi_axes": self.ellipsoid_semi_axes(),
                "translation": None, "H_hat": 0.0}
         if translations.shape[1] == 1:
