@@ -235,13 +235,19 @@ class SpeedSet:
         at constant heading. "forward"/"lateral" let the base turn while it
         moves (the shadow); "..._constant_heading" hold wz = 0; "rotation" is
         the turn rate in place."""
-        return {
-            "forward": self.max_component(0, held=1),
-            "forward_constant_heading": self.ray_speed((1.0, 0.0, 0.0)),
-            "lateral": self.max_component(1, held=0),
-            "lateral_constant_heading": self.ray_speed((0.0, 1.0, 0.0)),
-            "rotation": self.ray_speed((0.0, 0.0, 1.0)),
-        }
+        return max_speeds_of(self)
+
+
+def max_speeds_of(speed_set) -> dict[str, float]:
+    """The ``max_speed`` entries of any speed set with ``max_component`` and
+    ``ray_speed`` (:class:`SpeedSet`, :class:`rolling.RollingConstraints`)."""
+    return {
+        "forward": speed_set.max_component(0, held=1),
+        "forward_constant_heading": speed_set.ray_speed((1.0, 0.0, 0.0)),
+        "lateral": speed_set.max_component(1, held=0),
+        "lateral_constant_heading": speed_set.ray_speed((0.0, 1.0, 0.0)),
+        "rotation": speed_set.ray_speed((0.0, 0.0, 1.0)),
+    }
 
 
 def sigma_ratio(model, positions) -> float:
@@ -307,7 +313,7 @@ def analyze_rolling(model, positions, max_speed: float = math.inf) -> dict:
     the configuration itself."""
     rc = rolling.RollingConstraints(model.kinematics, positions, model.max_joint_velocity)
     h_hat, slowest, fastest = rc.holonomicity()
-    max_speeds, h_hat, slowest, fastest = capped(rc.max_speeds(), h_hat, slowest,
+    max_speeds, h_hat, slowest, fastest = capped(max_speeds_of(rc), h_hat, slowest,
                                                  fastest, max_speed)
     instantaneous = rc.instantaneous()
     if instantaneous["translation"] is not None and math.isfinite(max_speed):

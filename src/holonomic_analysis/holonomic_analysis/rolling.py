@@ -211,16 +211,6 @@ class RollingConstraints:
         speed = float(self.unit_speed_limits().min())
         return (1.0 if speed > 0 else 0.0), speed, speed
 
-    def max_speeds(self) -> dict[str, float]:
-        """:meth:`mobility.SpeedSet.max_speeds` on S (reorientation allowed)."""
-        return {
-            "forward": self.max_component(0, held=1),
-            "forward_constant_heading": self.ray_speed((1.0, 0.0, 0.0)),
-            "lateral": self.max_component(1, held=0),
-            "lateral_constant_heading": self.ray_speed((0.0, 1.0, 0.0)),
-            "rotation": self.ray_speed((0.0, 0.0, 1.0)),
-        }
-
     def ellipsoid_shape(self) -> np.ndarray:
         """S_E (3 x 3), ``E = {x : x^T S_E^-1 x <= 1}``: the image of the unit
         ball of normalised unit speeds ``sum_i |C_i x|^2 / R_i^2 <= 1``."""
