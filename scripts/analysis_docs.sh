@@ -46,3 +46,11 @@ run python -m holonomic_analysis.family_comparison hamr xr4000 swerve4 --driver 
     -p limits.linear.x.max_acceleration:=1.0 -p limits.linear.y.max_acceleration:=1.0 \
     -p limits.linear.x.max_deceleration:=1.5 -p limits.linear.y.max_deceleration:=1.5 \
     -p limits.linear.x.max_velocity:=1.2 -p limits.linear.y.max_velocity:=1.2
+# the swerve's static numbers: reoriented speeds, and the mobility at a configuration
+run holonomic-analyze swerve4
+run holonomic-analyze swerve4 --steer 1.570796,1.570796,1.570796,1.570796
+run holonomic-analyze swerve4 --steer 2.356194,-2.356194,-0.785398,0.785398
+run holonomic-analyze swerve4 --steer 0.3,0,0,0
+for d in 1.0 0.1 0.01; do
+    run holonomic-analyze swerve4 --measure --kinematic --directions 4 --distance "$d"
+done

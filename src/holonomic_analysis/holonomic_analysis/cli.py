@@ -61,7 +61,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--turret", type=number(), metavar="PHI",
                    help="DDROT: turret angle [rad] of the analysed configuration (default 0)")
     p.add_argument("--steer", type=_angles, metavar="PHI1,PHI2,...",
-                   help="PCV: steering angles [rad], one per caster, the joints' convention "
+                   help="PCV or swerve: steering angles [rad], one per caster or module, the "
+                        "joints' convention "
                         "(the wheel's rolling heading in base_link; default all 0)")
     p.add_argument("--sweep", action="append", default=[], metavar="NAME=START:STOP:N",
                    help="sweep a config parameter (repeatable), e.g. "
@@ -131,12 +132,19 @@ def run(args: argparse.Namespace, out=None) -> dict:
                  else f" (limits.linear.max_speed {result['speed_limit']:g} m/s caps them)"),
               f"  orientation bias {result['orientation_bias']:+.3f} rad/m "
               "(skew of the lateral-rotation projection)"]
+    if "instantaneous" in result:
+        report[1] += " with the wheels reoriented"
+        report.append(_instantaneous_line(result["instantaneous"]))
     figures = []
-    speeds = mobility.SpeedSet.of(model, positions)
     plot_dir = args.plot
     if plot_dir is not None:
         from holonomic_analysis import plots
         plot_dir.mkdir(parents=True, exist_ok=True)
+    if plot_dir is not None and "instantaneous" in result:
+        report.append("  (no ellipsoid figures: at a configuration this base's mobility is "
+                      f"{result['instantaneous']['mobility_dimension']}-D, the numbers above)")
+    elif plot_dir is not None:
+        speeds = mobility.SpeedSet.of(model, positions)
         angles = ", ".join(f"{v:+.2f}" for v in positions[_angle_joints(model)])
         title = f"{model.name} at {angles} rad"
         figures.append(plots.mobility_3d(speeds, title,
@@ -237,6 +245,19 @@ def run(args: argparse.Namespace, out=None) -> dict:
     else:
         print("\n".join(report), file=out)
     return result
+
+
+def _instantaneous_line(inst: dict) -> str:
+    """The report's line on the configuration's own mobility (rolling constraints)."""
+    basis = "; ".join("(" + ", ".join(f"{v:+.3f}" for v in b) + ")"
+                      for b in inst["mobility_basis"]) or "none: locked"
+    t = inst["translation"]
+    move = ("no translation" if t is None else
+            f"translation only along {math.degrees(t['direction']):+.1f} deg, "
+            f"up to {t['speed']:.3f} m/s")
+    return (f"  at this configuration: {inst['mobility_dimension']}-D mobility, twists "
+            f"(vx, vy, wz) along {basis}; {move}; H_hat {inst['H_hat']:.3f} "
+            "(the wheels must turn before any other move)")
 
 
 def _angle_joints(model) -> list[int]:

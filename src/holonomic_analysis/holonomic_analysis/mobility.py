@@ -39,6 +39,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from holonomic_analysis import rolling
+
 #: names of the twist components, in order
 AXES = ("vx", "vy", "wz")
 #: labels for plots
@@ -63,6 +65,15 @@ def configuration(model, steer: Sequence[float] | None = None,
                 raise ValueError(f"{model.name} has {n} casters: give {n} steering angles, "
                                  f"got {len(steer)}")
             positions[0::2] = steer
+    elif hasattr(model.kinematics, "steer_indices"):
+        steer_idx = np.arange(len(positions))[model.kinematics.steer_indices]
+        if turret is not None:
+            raise ValueError(f"--turret is for a DDROT; {model.name} takes --steer")
+        if steer is not None:
+            if len(steer) != len(steer_idx):
+                raise ValueError(f"{model.name} has {len(steer_idx)} steered wheels: give "
+                                 f"{len(steer_idx)} steering angles, got {len(steer)}")
+            positions[steer_idx] = steer
     else:
         if steer is not None:
             raise ValueError("--steer is for a PCV; a DDROT takes --turret")
@@ -224,13 +235,19 @@ class SpeedSet:
         at constant heading. "forward"/"lateral" let the base turn while it
         moves (the shadow); "..._constant_heading" hold wz = 0; "rotation" is
         the turn rate in place."""
-        return {
-            "forward": self.max_component(0, held=1),
-            "forward_constant_heading": self.ray_speed((1.0, 0.0, 0.0)),
-            "lateral": self.max_component(1, held=0),
-            "lateral_constant_heading": self.ray_speed((0.0, 1.0, 0.0)),
-            "rotation": self.ray_speed((0.0, 0.0, 1.0)),
-        }
+        return max_speeds_of(self)
+
+
+def max_speeds_of(speed_set) -> dict[str, float]:
+    """The ``max_speed`` entries of any speed set with ``max_component`` and
+    ``ray_speed`` (:class:`SpeedSet`, :class:`rolling.RollingConstraints`)."""
+    return {
+        "forward": speed_set.max_component(0, held=1),
+        "forward_constant_heading": speed_set.ray_speed((1.0, 0.0, 0.0)),
+        "lateral": speed_set.max_component(1, held=0),
+        "lateral_constant_heading": speed_set.ray_speed((0.0, 1.0, 0.0)),
+        "rotation": speed_set.ray_speed((0.0, 0.0, 1.0)),
+    }
 
 
 def sigma_ratio(model, positions) -> float:
@@ -264,7 +281,11 @@ def capped(speeds: Mapping[str, float], h_hat: float, slowest: float, fastest: f
 def analyze(model, positions, max_speed: float = math.inf) -> dict:
     """The numbers of ``holonomic-analyze --json`` for one configuration;
     ``max_speed`` [m/s]: the config's limit on the norm of (vx, vy), which
-    caps the translation speeds and H_hat (:func:`capped`)."""
+    caps the translation speeds and H_hat (:func:`capped`). A base whose
+    wheels must turn before they roll in a new direction:
+    :func:`analyze_rolling`."""
+    if rolling.applies(model.kinematics, positions):
+        return analyze_rolling(model, positions, max_speed)
     speeds = SpeedSet.of(model, positions)
     h_hat, slowest, fastest = speeds.holonomicity()
     max_speeds, h_hat, slowest, fastest = capped(speeds.max_speeds(), h_hat, slowest,
@@ -281,6 +302,37 @@ def analyze(model, positions, max_speed: float = math.inf) -> dict:
         "speed_limit": None if math.isinf(max_speed) else float(max_speed),
         "orientation_bias": speeds.orientation_bias(),
         "ellipsoid_semi_axes": [float(v) for v in np.sqrt(np.linalg.eigvalsh(S))[::-1]],
+    }
+
+
+def analyze_rolling(model, positions, max_speed: float = math.inf) -> dict:
+    """:func:`analyze` for a base with rolling constraints
+    (:mod:`holonomic_analysis.rolling`, docs/analysis.md "Swerve"): H_hat,
+    max_speed, orientation_bias and ellipsoid_semi_axes with reorientation
+    allowed (the steady-state speeds); sigma_ratio and ``instantaneous`` at
+    the configuration itself."""
+    rc = rolling.RollingConstraints(model.kinematics, positions, model.max_joint_velocity)
+    h_hat, slowest, fastest = rc.holonomicity()
+    max_speeds, h_hat, slowest, fastest = capped(max_speeds_of(rc), h_hat, slowest,
+                                                 fastest, max_speed)
+    instantaneous = rc.instantaneous()
+    if instantaneous["translation"] is not None and math.isfinite(max_speed):
+        instantaneous["translation"]["speed"] = min(instantaneous["translation"]["speed"],
+                                                    float(max_speed))
+    S = rc.ellipsoid_shape()
+    return {
+        "robot": model.name,
+        "kinematics": model.kind,
+        "configuration": dict(zip(model.joint_names, map(float, positions))),
+        "H_hat": h_hat,
+        "sigma_ratio": rc.sigma_ratio(),
+        "max_speed": max_speeds,
+        "constant_heading_speed": {"slowest": slowest, "fastest": fastest},
+        "speed_limit": None if math.isinf(max_speed) else float(max_speed),
+        # 0 (not a rounding's -0.000) for a geometry symmetric about base_link x
+        "orientation_bias": float(S[1, 2] / S[1, 1]) if abs(S[1, 2]) > 1e-12 * S[1, 1] else 0.0,
+        "ellipsoid_semi_axes": [float(v) for v in np.sqrt(np.linalg.eigvalsh(S))[::-1]],
+        "instantaneous": instantaneous,
     }
 
 

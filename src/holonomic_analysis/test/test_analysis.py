@@ -379,6 +379,9 @@ def test_plot_writes_the_figures_and_sweep_prints_a_row_per_value(tmp_path, caps
     (["hamr", "--sweep", "ddrot.turret_offset=0.1:0.2"], "KEY=START:STOP:N"),
     (["hamr", "-p", "ddrot.wheel_radius:=-1"], "ddrot.wheel_radius"),
     (["nosuchrobot"], "config name"),
+    (["swerve4", "--steer", "0,1"], "4 steered wheels: give 4 steering angles"),
+    (["swerve4", "--turret", "1"], "--turret is for a DDROT"),
+    (["swerve4", "--steer", "0,nan,0,0"], "finite comma-separated radians"),
 ])
 def test_bad_arguments_exit_2_with_one_line(argv, message):
     proc = subprocess.run([sys.executable, "-c",
