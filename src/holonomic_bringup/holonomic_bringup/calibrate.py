@@ -5,7 +5,9 @@ Reads the joint states (and the simulator's ground truth) with the recorded
 configuration's model -- the one the controller ran, whose encoder zeros the
 recorded joint positions already have subtracted -- estimates the parameters
 (holonomic_core.calibration: a PCV's wheel radii, caster offsets and steering
-zeros; a DDROT's wheel radii, wheel separation and turret zero), prints each
+zeros, the common scale from a measured distance, best a straight run:
+``--distance D --straight-run``; a DDROT's wheel radii, wheel separation and
+turret zero), prints each
 estimate with its standard error and writes a ROS 2 params-file overlay that
 ``holonomic-bringup ROBOT --params-file OVERLAY`` loads over the robot config.
 Bad input (no such file, not a recording, too little or too one-sided
@@ -90,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
                              "(a DDROT needs it)")
     parser.add_argument("--distance", type=float, metavar="METRES",
                         help="a PCV: measured straight-line distance from where the recording "
-                             "starts to where it ends (fixes the scale of the radii); a DDROT: "
+                             "starts to where it ends, or with --straight-run the length of its "
+                             "straight run (fixes the scale of the radii); a DDROT: "
                              "how far the straight run ended along its start heading")
     parser.add_argument("--straight-run", action="store_true",
                         help="a PCV: --distance is the measured length of the recording's last "

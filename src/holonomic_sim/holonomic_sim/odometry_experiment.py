@@ -184,12 +184,13 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
     kind of ``motion`` (:mod:`holonomic_sim.motion_kinds`) drives its
     open-loop schedule for ``duration`` instead, then stops where it is.
     ``overrides``: config keys (a slip condition, simulator faults, the drive
-    model); ``calibration``: a calibration overlay for the controller. The
+    model); ``calibration``: a calibration overlay for the controller.
     ``straight`` [m] > 0: after the rest at ``finish``, one more pause and a
-    straight run of about that length at constant heading (the command
-    (STRAIGHT_SPEED, 0, 0), open loop, as a user pushes the stick forward),
-    then a rest (a PCV's ``--distance --straight-run`` route). The
-    simulated robot is built as holonomic-bringup builds it
+    straight run of about that length at constant heading (forward at
+    STRAIGHT_SPEED, the heading held on the true pose as a user steers by
+    eye: a worn robot commanded straight open loop curves), then a rest (a
+    PCV's ``--distance --straight-run`` route). The simulated robot is built
+    as holonomic-bringup builds it
     (:func:`holonomic_core.nominal.driver_for`): from the robot's config
     file's geometry and the ``sim.*`` errors, so neither the overlay nor a
     geometry key among ``overrides`` changes it (they are the controller's
@@ -245,7 +246,7 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
         for _ in range(int(0.5 * cfg.controller.control_rate)):
             step()
         if straight > 0:
-            _straight_run(ctrl, step, clock, straight, cfg.controller.control_rate)
+            _straight_run(ctrl, step, clock, straight, lambda: truths[-1])
         fault = ctrl.fault
         hidden = dict(driver.hidden_truth)
     return Recording(robot, condition, seed, cfg, np.array(stamps), np.array(readings),
@@ -255,20 +256,23 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
                      motion=motion)
 
 
-#: [m/s] the straight run's commanded speed; [s] the rests around it (longer
-#: than the calibration's SEGMENT_PAUSE, so the run is a segment of its own)
-STRAIGHT_SPEED, STRAIGHT_REST = 0.5, 1.0
+#: [m/s] the straight run's speed; [s] the rests around it (longer than the
+#: calibration's SEGMENT_PAUSE, so the run is a stretch of motion of its
+#: own); [1/s] the gain of the user's heading hold
+STRAIGHT_SPEED, STRAIGHT_REST, HEADING_HOLD_GAIN = 0.5, 1.0, 1.0
 
 
-def _straight_run(ctrl, step, clock, length: float, rate: float) -> None:
+def _straight_run(ctrl, step, clock, length: float, pose) -> None:
     """Rest, drive forward at STRAIGHT_SPEED for ``length`` [m] worth of
-    time, rest (``step``: one recorded control cycle)."""
-    for command, seconds in (((0.0, 0.0, 0.0), STRAIGHT_REST),
-                             ((STRAIGHT_SPEED, 0.0, 0.0), length / STRAIGHT_SPEED),
-                             ((0.0, 0.0, 0.0), STRAIGHT_REST)):
+    time holding the start heading (``pose()``: the true pose, what the
+    user sees), rest (``step``: one recorded control cycle)."""
+    heading = pose()[2]
+    for speed, seconds in ((0.0, STRAIGHT_REST), (STRAIGHT_SPEED, length / STRAIGHT_SPEED),
+                           (0.0, STRAIGHT_REST)):
         end = clock.now + seconds
         while clock.now < end:
-            ctrl.set_command(command)
+            turn = HEADING_HOLD_GAIN * wrap_angle(heading - pose()[2]) if speed else 0.0
+            ctrl.set_command((speed, 0.0, turn))
             step()
 
 
