@@ -5,7 +5,9 @@ Reads the joint states (and the simulator's ground truth) with the recorded
 configuration's model -- the one the controller ran, whose encoder zeros the
 recorded joint positions already have subtracted -- estimates the parameters
 (holonomic_core.calibration: a PCV's wheel radii, caster offsets and steering
-zeros; a DDROT's wheel radii, wheel separation and turret zero), prints each
+zeros, the common scale from a measured distance, best a straight run:
+``--distance D --straight-run``; a DDROT's wheel radii, wheel separation and
+turret zero), prints each
 estimate with its standard error and writes a ROS 2 params-file overlay that
 ``holonomic-bringup ROBOT --params-file OVERLAY`` loads over the robot config.
 Bad input (no such file, not a recording, too little or too one-sided
@@ -90,8 +92,13 @@ def main(argv: list[str] | None = None) -> int:
                              "(a DDROT needs it)")
     parser.add_argument("--distance", type=float, metavar="METRES",
                         help="a PCV: measured straight-line distance from where the recording "
-                             "starts to where it ends (fixes the scale of the radii); a DDROT: "
+                             "starts to where it ends, or with --straight-run the length of its "
+                             "straight run (fixes the scale of the radii); a DDROT: "
                              "how far the straight run ended along its start heading")
+    parser.add_argument("--straight-run", action="store_true",
+                        help="a PCV: --distance is the measured length of the recording's last "
+                             "stretch of motion, a straight run at constant heading after a "
+                             "pause (default: from where the recording starts to where it ends)")
     parser.add_argument("--lateral", type=float, default=0.0, metavar="METRES",
                         help="a DDROT: how far the straight run ended to the left (negative: "
                              "right) of its start heading (default 0)")
@@ -109,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from holonomic_core.calibration import (CalibrationError, calibrate, calibrate_measured,
                                             family_for, find_reference_segments,
-                                            samples_from_readings)
+                                            last_straight_run, samples_from_readings)
     from holonomic_core.schema import ConfigError
 
     def fail(message: str) -> int:
@@ -124,6 +131,11 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f"--turns must be a counted number of turns > 0, got {args.turns:g}")
     if args.heading_deg is not None and args.turns is None:
         return fail("--heading-deg needs --distance and --turns (a DDROT's measured run)")
+    if args.straight_run and args.distance is None:
+        return fail("--straight-run needs --distance: the measured length of the straight run")
+    if args.straight_run and args.turns is not None:
+        return fail("--straight-run is for a pcv; a ddrot's --distance with --turns is already "
+                    "its straight run")
     if args.turns is not None and args.distance is None:
         return fail("--turns needs --distance: the straight run fixes the radii, the rotation "
                     "the separation")
@@ -135,6 +147,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.reference == "ground_truth" and truth is None:
             raise CalibrationError("--reference ground_truth needs ground_truth/odom in the "
                                    "recording (simulator runs publish it)")
+        if args.straight_run and model.kind != "pcv":
+            raise CalibrationError(f"--straight-run is for a pcv, not a {model.kind} (a ddrot's "
+                                   "--distance with --turns is its straight run)")
         measured = model.kind == "ddrot" and args.distance is not None
         if measured:
             if args.turns is None:
@@ -152,7 +167,11 @@ def main(argv: list[str] | None = None) -> int:
             samples = samples_from_readings(stamps, positions,
                                             truth if args.reference == "ground_truth" else None)
             reference = "distance" if args.distance is not None else args.reference
-            result = calibrate(model, samples, reference, args.distance)
+            line = None
+            if args.straight_run:
+                first, last = last_straight_run(family_for(model), stamps, positions)
+                line = samples_from_readings(stamps[first:last + 1], positions[first:last + 1])
+            result = calibrate(model, samples, reference, args.distance, distance_samples=line)
     except (ValueError, ConfigError) as exc:   # CalibrationError is a ValueError
         return fail(str(exc))
     fit = "" if reference == "measured" else \

@@ -177,6 +177,12 @@ CALIBRATE = [
     (["hamr", "{junk_mcap}", "--distance", "5", "--turns", "3", "--reference", "ground_truth"],
      "not both"),
     (["hamr", "{junk_mcap}", "--distance", "5", "--turns", "three"], "invalid float value"),
+    (["xr4000", "{junk_mcap}", "--straight-run"], "--straight-run needs --distance"),
+    (["xr4000", "{junk_mcap}", "--straight-run", "--reference", "ground_truth"],
+     "--straight-run needs --distance"),
+    (["hamr", "{junk_mcap}", "--distance", "5", "--turns", "3", "--straight-run"],
+     "--straight-run is for a pcv"),
+    (["xr4000", "{junk_mcap}", "--straight-run=yes"], "ignored explicit argument"),
 ]
 
 ODOMETRY_CALIBRATE = [

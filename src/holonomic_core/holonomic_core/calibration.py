@@ -257,15 +257,20 @@ def jacobian(fun, z: np.ndarray, step: float = 1e-6) -> np.ndarray:
 
 
 def calibrate(model, samples: Samples, reference: str = "none",
-              distance: float | None = None, iterations: int = 30) -> CalibrationResult:
+              distance: float | None = None, iterations: int = 30,
+              distance_samples: Samples | None = None) -> CalibrationResult:
     """Estimate the family's parameters from ``samples``.
 
     ``reference``: "ground_truth" (``samples.reference`` must be set) fixes
     the scale from the true motion; "distance" scales radii and caster
     offsets so that the odometry's straight-line displacement from the first
-    to the last sample is ``distance`` [m] (measured by the user); "none" keeps the configured
-    mean radius. Raises :class:`CalibrationError` (one line naming the
-    missing motion) when the samples cannot determine the parameters.
+    to the last sample is ``distance`` [m] (measured by the user) -- of
+    ``distance_samples`` when given (a straight run, :func:`last_straight_run`;
+    the fit of ratios, offsets and zeros still uses every sample), else of
+    ``samples``; "none" keeps the configured mean radius. Raises
+    :class:`CalibrationError` (one line naming the missing motion) when the
+    samples cannot determine the parameters, or when the straight run
+    turned STRAIGHT_MAX_TURN or more by the fitted geometry.
     """
     if reference not in ("none", "ground_truth", "distance"):
         raise ValueError(f"reference must be none, ground_truth or distance, got {reference!r}")
@@ -314,9 +319,18 @@ def calibrate(model, samples: Samples, reference: str = "none",
     if skidded.any():
         result.notes.append(f"{int(skidded.sum())} of {len(skidded)} samples left out: a wheel "
                             f"skidded (fit residual above {SKID_SPEED:g} m/s)")
+    if distance_samples is not None:
+        turn = float(family.body(result.theta, distance_samples)[:, 2].sum())
+        if abs(turn) >= STRAIGHT_MAX_TURN:
+            raise CalibrationError(
+                f"the straight run turned {math.degrees(turn):+.1f} deg (by the calibrated "
+                f"odometry): drive it at constant heading, turning less than "
+                f"{math.degrees(STRAIGHT_MAX_TURN):g} deg")
     if reference == "distance":
-        # the odometry's end point: of the whole recording, skids included
-        _scale_to_distance(result, recorded, distance)
+        # the odometry's end point: of the whole recording, skids included,
+        # or of the measured straight run
+        _scale_to_distance(result, recorded if distance_samples is None else distance_samples,
+                           distance)
     elif reference == "none" and family.self_consistent:
         result.notes.append("overall scale not observed: the mean wheel radius is kept as "
                             "configured (give --distance or --reference ground_truth)")
@@ -471,6 +485,42 @@ def missing_motion(family, samples: Samples) -> str:
     if m["direction_spread"] < 0.2:
         return "one direction of travel only: drive sideways and diagonally too"
     return "drive longer, with more changes of direction and rotation"
+
+
+# -- a measured straight run (a PCV's scale) --
+
+#: a PCV's straight run for --distance turns less than this [rad] by the
+#: calibrated odometry (constant heading: the odometry's heading error does
+#: not bend the path the distance is compared with). Judged after the fit:
+#: with the configured geometry, steering zeros a degree or two off make a
+#: run held at constant heading seem to turn several degrees
+STRAIGHT_MAX_TURN = math.radians(10.0)
+
+
+def last_straight_run(family, stamps: Sequence[float], positions: np.ndarray) -> tuple[int, int]:
+    """(first, last) reading indices of the recording's last motion segment
+    (:func:`motion_segments`: after a pause of SEGMENT_PAUSE), the straight
+    run of ``calibrate(..., distance_samples=...)``: base_link at least
+    0.5 m from where it started by the configured odometry (whether it kept
+    its heading is judged with the fitted geometry, in :func:`calibrate`).
+    Raises CalibrationError naming what is wrong."""
+    stamps = np.asarray(stamps, float)
+    segments = motion_segments(stamps, positions)
+    if len(segments) < 2:
+        raise CalibrationError("--straight-run needs the varied driving, a pause of at least "
+                               f"{SEGMENT_PAUSE:g} s, then the straight run, then a pause "
+                               f"(found {len(segments)} stretch(es) of motion)")
+    first, last = segments[-1]
+    seg = samples_from_readings(stamps[first:last + 1], positions[first:last + 1])
+    if len(seg) < 2:
+        raise CalibrationError("the recording's last stretch of motion is too short for a "
+                               "straight run")
+    span = float(np.linalg.norm(end_point(family, family.nominal, seg)))
+    if span < _LINE_MIN_M:
+        raise CalibrationError(
+            f"the recording's last stretch of motion is not a straight run (it ended "
+            f"{span:.2f} m from its start; needs at least {_LINE_MIN_M:g} m at constant heading)")
+    return first, last
 
 
 # -- a measured straight line and a measured rotation (a base without redundancy) --

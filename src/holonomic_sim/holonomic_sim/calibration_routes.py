@@ -10,9 +10,9 @@ same code as ``holonomic-bringup``'s control loop, no ROS):
    route one straight run and three turns about the axle;
 2. it is calibrated by the route's reference: ``ground_truth`` (the
    simulator's true poses, ``holonomic-calibrate --reference ground_truth``),
-   ``distance`` (a PCV: the drive ends 8 m from where it started and the
-   tool gets that straight-line distance, ``--distance``; see
-   :data:`DISTANCE_FINISH`), ``tape`` (a DDROT:
+   ``distance`` (a PCV: after the random drive and a pause a straight run
+   of :data:`STRAIGHT_RUN` at constant heading, whose start-to-end distance
+   the tool gets, ``--distance --straight-run``), ``tape`` (a DDROT:
    the run's forward and lateral end point, its heading change and the
    turns, ``--distance --lateral --heading-deg --turns``), each measured
    from the true poses at rest as a user would;
@@ -33,7 +33,8 @@ import math
 from dataclasses import dataclass
 
 from holonomic_core.calibration import (calibrate, calibrate_measured, family_for,
-                                        find_reference_segments, samples_from_readings)
+                                        find_reference_segments, last_straight_run,
+                                        samples_from_readings)
 from holonomic_core.config import load_config
 from holonomic_core.se2 import relative_pose
 from holonomic_sim.odometry_experiment import final_errors, simulate
@@ -48,13 +49,13 @@ WORN = {
 }
 #: the routes per family
 ROUTES = {"pcv": ("ground_truth", "distance"), "ddrot": ("ground_truth", "tape")}
-#: the calibration drive of the distance route ends here (odom [m, m, rad]).
-#: --distance scales the geometry until the odometry's end point spans the
-#: measured distance, so the drive's own odometry drift d (slip over the whole
-#: drive) becomes a scale error of about d / distance: ending 2 m away that
-#: error is over 1 %, enough to leave the check path worse than uncalibrated;
-#: 8 m away it is about 0.2 %, well below the geometry errors it corrects
-DISTANCE_FINISH = (8.0, 0.0, 0.0)
+#: [m] the distance route's straight run. --distance scales the geometry
+#: until the odometry spans the measured distance, so the odometry's drift
+#: over the measured stretch becomes a scale error of drift / distance: over
+#: a whole random drive ending 8 m from its start that drift leaves the scale
+#: about 0.2-0.3 % off, while a run at constant heading and speed has almost
+#: no slip and no heading drift to bend it
+STRAIGHT_RUN = 5.0
 #: the check path's seed is this plus the fault seed: a path no calibration drove
 PATH_SEED_OFFSET = 1000
 #: the route's criterion: calibrated error <= RATIO x nominal + SLACK [m],
@@ -121,13 +122,18 @@ def calibrate_route(robot: str, route: str, sim_seed: int, duration: float = 40.
                                            drive.positions)
         return calibrate_measured(drive.config.model, segments, drive.forward, drive.lateral,
                                   drive.turns, drive.heading).overlay()
-    finish = DISTANCE_FINISH if route == "distance" else (0.0, 0.0, 0.0)
-    run = simulate(robot, sim_seed, duration, **own_limits(robot), finish=finish,
+    run = simulate(robot, sim_seed, duration, **own_limits(robot),
+                   straight=STRAIGHT_RUN if route == "distance" else 0.0,
                    overrides={**faults, **CALIBRATION_DRIVE[kind]})
     if route == "distance":
+        model = run.config.model
         samples = samples_from_readings(run.stamps, run.positions)
-        dx, dy, _ = relative_pose(run.truth[0], run.truth[-1])
-        return calibrate(run.config.model, samples, "distance", math.hypot(dx, dy)).overlay()
+        first, last = last_straight_run(family_for(model), run.stamps, run.positions)
+        line = samples_from_readings(run.stamps[first:last + 1], run.positions[first:last + 1])
+        # the tape between the marks under base_link at the run's two rests
+        dx, dy, _ = relative_pose(run.truth[first], run.truth[last])
+        return calibrate(model, samples, "distance", math.hypot(dx, dy),
+                         distance_samples=line).overlay()
     samples = samples_from_readings(run.stamps, run.positions, run.truth)
     return calibrate(run.config.model, samples, "ground_truth").overlay()
 

@@ -176,15 +176,21 @@ def run_overrides(seed: int, speed: float, acceleration: float,
 def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
              speed: float = 1.25, acceleration: float = 2.0, overrides: dict | None = None,
              calibration: dict | None = None, condition: str = "",
-             finish=(0.0, 0.0, 0.0), motion: str = "random") -> Recording:
+             finish=(0.0, 0.0, 0.0), motion: str = "random",
+             straight: float = 0.0) -> Recording:
     """Random moves inside ``area`` [m] for ``duration`` [s] (targets drawn
     from ``seed``), then to ``finish`` (x, y, yaw in odom [m, m, rad];
     default back to the start), recorded (see the module docstring); another
     kind of ``motion`` (:mod:`holonomic_sim.motion_kinds`) drives its
     open-loop schedule for ``duration`` instead, then stops where it is.
     ``overrides``: config keys (a slip condition, simulator faults, the drive
-    model); ``calibration``: a calibration overlay for the controller. The
-    simulated robot is built as holonomic-bringup builds it
+    model); ``calibration``: a calibration overlay for the controller.
+    ``straight`` [m] > 0: after the rest at ``finish``, one more pause and a
+    straight run of about that length at constant heading (forward at
+    STRAIGHT_SPEED, the heading held on the true pose as a user steers by
+    eye: a worn robot commanded straight open loop curves), then a rest (a
+    PCV's ``--distance --straight-run`` route). The simulated robot is built
+    as holonomic-bringup builds it
     (:func:`holonomic_core.nominal.driver_for`): from the robot's config
     file's geometry and the ``sim.*`` errors, so neither the overlay nor a
     geometry key among ``overrides`` changes it (they are the controller's
@@ -239,6 +245,8 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
         ctrl.set_command((0.0, 0.0, 0.0))
         for _ in range(int(0.5 * cfg.controller.control_rate)):
             step()
+        if straight > 0:
+            _straight_run(ctrl, step, clock, straight, lambda: truths[-1])
         fault = ctrl.fault
         hidden = dict(driver.hidden_truth)
     return Recording(robot, condition, seed, cfg, np.array(stamps), np.array(readings),
@@ -246,6 +254,26 @@ def simulate(robot: str, seed: int, duration: float = 60.0, area=(1.5, 2.5),
                      internal_force=np.array(internal),
                      fault=None if fault is None else str(fault), hidden_truth=hidden,
                      motion=motion)
+
+
+#: [m/s] the straight run's speed; [s] the rests around it (longer than the
+#: calibration's SEGMENT_PAUSE, so the run is a stretch of motion of its
+#: own); [1/s] the gain of the user's heading hold
+STRAIGHT_SPEED, STRAIGHT_REST, HEADING_HOLD_GAIN = 0.5, 1.0, 1.0
+
+
+def _straight_run(ctrl, step, clock, length: float, pose) -> None:
+    """Rest, drive forward at STRAIGHT_SPEED for ``length`` [m] worth of
+    time holding the start heading (``pose()``: the true pose, what the
+    user sees), rest (``step``: one recorded control cycle)."""
+    heading = pose()[2]
+    for speed, seconds in ((0.0, STRAIGHT_REST), (STRAIGHT_SPEED, length / STRAIGHT_SPEED),
+                           (0.0, STRAIGHT_REST)):
+        end = clock.now + seconds
+        while clock.now < end:
+            turn = HEADING_HOLD_GAIN * wrap_angle(heading - pose()[2]) if speed else 0.0
+            ctrl.set_command((speed, 0.0, turn))
+            step()
 
 
 def _drive_open_loop(ctrl, step, clock, plan: MotionPlan, duration: float) -> None:

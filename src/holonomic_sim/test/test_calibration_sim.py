@@ -126,14 +126,95 @@ def test_holonomic_calibrate_refuses_a_ddrot_run_without_its_rotation(
         assert message in err and len(err.strip().splitlines()) == 1, err
 
 
+def _program_reading(monkeypatch, tmp_path, run, keep=slice(None)):
+    """holonomic-calibrate with its recording reader replaced by ``run``'s
+    readings (``keep``: which of them); (the program module, a recording path)."""
+    from holonomic_bringup import calibrate as program
+    monkeypatch.setattr(program, "read_recording", lambda *a: (
+        run.config.model, run.config.values, run.stamps[keep], run.positions[keep], None))
+    recording = tmp_path / "run.mcap"
+    recording.write_bytes(b"")
+    return program, recording
+
+
+@pytest.fixture(scope="module")
+def xr4000_straight_run_drive():
+    # the distance route's drive: the worn XR4000 (fault seed 1), 40 s of
+    # random moves in torque mode, back to the start, a pause, 5 m straight
+    # at constant heading, a pause
+    from holonomic_sim.calibration_experiment import CALIBRATION_DRIVE
+    from holonomic_sim.calibration_routes import STRAIGHT_RUN, own_limits, worn_overrides
+    from holonomic_sim.odometry_experiment import simulate
+    return simulate("xr4000", 1, 40.0, **own_limits("xr4000"), straight=STRAIGHT_RUN,
+                    overrides={**worn_overrides("xr4000", 1), **CALIBRATION_DRIVE["pcv"]})
+
+
+def test_holonomic_calibrate_scales_a_pcv_to_its_measured_straight_run(
+        xr4000_straight_run_drive, tmp_path, monkeypatch, capsys):
+    # --distance --straight-run: the recording's last stretch of motion is
+    # the 5 m run; the tape between its two rests (the true poses there) sets
+    # the common scale. The radii come out as the simulator's hidden ones;
+    # the same tape compared with the whole recording's start-to-end
+    # odometry (the run ignored) left them 3.1 % off
+    from holonomic_core.calibration import family_for, last_straight_run
+    from holonomic_core.config import read_params_file
+    from holonomic_core.se2 import relative_pose
+    run = xr4000_straight_run_drive
+    first, last = last_straight_run(family_for(run.config.model), run.stamps, run.positions)
+    # the run starts after the random drive (40 s) and ends with the recording
+    assert run.stamps[first] > 40.0 and run.stamps[-1] - run.stamps[last] < 1.5
+    dx, dy, _ = relative_pose(run.truth[first], run.truth[last])
+    tape = math.hypot(dx, dy)
+    assert 4.5 < tape < 5.1
+    program, recording = _program_reading(monkeypatch, tmp_path, run)
+    out = tmp_path / "overlay.yaml"
+    assert program.main(["xr4000", str(recording), "--distance", f"{tape:.4f}",
+                         "--straight-run", "--output", str(out)]) == 0
+    assert "reference distance" in capsys.readouterr().out
+    values = read_params_file(out)
+    radii = [k for k in values if k.endswith("wheel_radius")]
+    assert len(radii) == 4
+    for key in radii:
+        # measured: within 0.003 % of the hidden radii (seed 1)
+        assert values[key] == pytest.approx(run.hidden_truth[key], rel=0.001), key
+
+
+def test_holonomic_calibrate_refuses_a_straight_run_that_is_not_there(
+        xr4000_straight_run_drive, hamr_reference_drive, tmp_path, monkeypatch, capsys):
+    pcv = xr4000_straight_run_drive
+    before_run = pcv.stamps < pcv.stamps[-1] - 5.0 / 0.5 - 1.5   # cut in the rest before it
+    cases = (
+        # the random drive alone: no pause, no second stretch of motion
+        (pcv, before_run, "xr4000", "--straight-run needs the varied driving, a pause"),
+        # a DDROT's straight run comes with --turns (its own route)
+        (hamr_reference_drive, slice(None), "hamr", "--straight-run is for a pcv, not a ddrot"),
+    )
+    for run, keep, robot, message in cases:
+        program, recording = _program_reading(monkeypatch, tmp_path, run, keep)
+        assert program.main([robot, str(recording), "--distance", "5", "--straight-run"]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+    # a "straight run" that turned: the last 10 s of the random drive (its
+    # return to the start turns the base back to its start heading)
+    from holonomic_core.calibration import CalibrationError, calibrate, samples_from_readings
+    end = int(np.flatnonzero(before_run)[-1])
+    turning = (pcv.stamps > pcv.stamps[end] - 10.0) & before_run
+    with pytest.raises(CalibrationError, match="turned .* deg .*drive it at constant heading"):
+        calibrate(pcv.config.model, samples_from_readings(pcv.stamps, pcv.positions),
+                  "distance", 2.0, distance_samples=samples_from_readings(
+                      pcv.stamps[turning], pcv.positions[turning]))
+
+
 @pytest.mark.parametrize("robot, route", [("xr4000", "ground_truth"), ("xr4000", "distance"),
                                           ("hamr", "ground_truth"), ("hamr", "tape")])
 def test_a_calibrated_worn_robot_drives_a_held_out_path_as_well_as_a_nominal_one(robot, route):
     """The documented route, ROS-free (holonomic_sim.calibration_routes, the
     code holonomic-bringup and holonomic-calibrate run): a worn robot (tyres
     and offsets / separation +-2 %, zeros up to 0.03 rad, fault seed 1) is
-    calibrated by ``route`` (40 s random drive -- for ``distance`` ending
-    8 m from its start -- or the DDROT's 5 m run and 3 turns), then drives another 15 s path without errors, worn, and worn
+    calibrated by ``route`` (40 s random drive -- for ``distance`` then a
+    pause and a 5 m straight run at constant heading, whose tape-measured
+    length sets the scale (--distance --straight-run) -- or the DDROT's 5 m
+    run and 3 turns), then drives another 15 s path without errors, worn, and worn
     with the overlay. The docs/calibration.md table (five seeds) comes from
     holonomic-calibration-experiment --routes 5."""
     from holonomic_sim.calibration_routes import route_trial
