@@ -41,9 +41,9 @@ from typing import Any
 #: reached through a Remote
 _PLAIN = (type(None), bool, int, float, complex, str, bytes, tuple, list, dict, set,
           frozenset, enum.Enum)
-#: how long the child may take to import, build the drives and start [s]
-#: (well under a second on an idle machine; a start starved of CPU can take
-#: seconds, and a slow start is not a failure)
+#: how long the child may take to import, build the drives and start [s]:
+#: generous, since a start starved of CPU by other work takes seconds and a
+#: slow start is not a failure
 START_TIMEOUT = 60.0
 
 
