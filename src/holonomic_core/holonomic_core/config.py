@@ -48,6 +48,8 @@ from holonomic_core.schema import (ConfigError, ParamSpec, flatten, unknown_key_
 from holonomic_core.slip_monitor import SlipLimits
 from holonomic_core.torque import dynamics_for
 
+_NOISE = OdometryNoise()
+
 #: the node name under which config files hold their parameters
 NODE_NAME = "base_controller"
 
@@ -166,51 +168,54 @@ CONTROLLER_SPECS: list[ParamSpec] = [
     ParamSpec("enable_on_start", "bool",
               "Arm the motors at start. Default false: motors start disarmed and "
               "~/enable arms them.", default=False),
-    # defaults: the XR4000's profile for its default floor on the drive model
-    # (config/xr4000.yaml, the command there; docs/odometry_experiment.md)
+    # the noise defaults are OdometryNoise's, written once there (the XR4000's
+    # profile for its default floor; config/xr4000.yaml, docs/odometry_experiment.md)
     ParamSpec("odometry.twist_window", "double",
               "Span of the encoder readings whose least-squares line gives the published "
               "twist [s]; it lags a ramp by half of it; 0: the last two readings.",
               default=0.03, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.linear_variance_per_meter", "double",
               "Position variance added per metre travelled [m^2/m].",
-              default=8.26e-07, minimum=0.0, maximum=1.0),
+              default=_NOISE.linear_variance_per_meter, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.angular_variance_per_radian", "double",
               "Heading variance added per radian turned [rad^2/rad].",
-              default=1.57e-06, minimum=0.0, maximum=1.0),
+              default=_NOISE.angular_variance_per_radian, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.angular_variance_per_meter", "double",
               "Heading variance added per metre travelled [rad^2/m].",
-              default=2.28e-06, minimum=0.0, maximum=1.0),
+              default=_NOISE.angular_variance_per_meter, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.slip_position_gain", "double",
               "Position variance added per squared RMS contact residual the estimator could "
               "not explain, per second [s] (m^2 per (m/s)^2 s).",
-              default=8.14e-09, minimum=0.0, maximum=1e4),
+              default=_NOISE.slip_position_gain, minimum=0.0, maximum=1e4),
     ParamSpec("odometry.slip_heading_gain", "double",
               "Heading variance added per squared RMS contact residual, per second [s/m^2] "
-              "(rad^2 per (m/s)^2 s).", default=0.644, minimum=0.0, maximum=1e6),
+              "(rad^2 per (m/s)^2 s).", default=_NOISE.slip_heading_gain, minimum=0.0,
+              maximum=1e6),
     ParamSpec("odometry.slip4_position_gain", "double",
               "Position variance added per fourth power of the RMS contact residual, per "
               "second [s^3/m^2] (m^2 per (m/s)^4 s): the slip no residual shows grows faster "
-              "than the residual when the tyres slide.", default=1.41e-10, minimum=0.0, maximum=1e8),
+              "than the residual when the tyres slide.", default=_NOISE.slip4_position_gain,
+              minimum=0.0, maximum=1e8),
     ParamSpec("odometry.slip4_heading_gain", "double",
               "Heading variance added per fourth power of the RMS contact residual, per "
-              "second [s^3/m^4] (rad^2 per (m/s)^4 s).", default=2.56e-06, minimum=0.0, maximum=1e10),
+              "second [s^3/m^4] (rad^2 per (m/s)^4 s).", default=_NOISE.slip4_heading_gain,
+              minimum=0.0, maximum=1e10),
     ParamSpec("odometry.latency_variance", "double",
               "Mean square of the readings' latency (how much older a reading is than its "
               "stamp) [s^2]: the published pose covariance adds latency_variance x u u^T, u "
               "the current twist in odom (the pose error of a delay, which does not "
-              "accumulate).", default=0.0, minimum=0.0, maximum=1.0),
+              "accumulate).", default=_NOISE.latency_variance, minimum=0.0, maximum=1.0),
     ParamSpec("odometry.twist_variance", "double_array",
               "Variances of the reported twist (vx, vy, wz) without slip or acceleration "
               "[(m/s)^2, (m/s)^2, (rad/s)^2].",
-              default=(2.22e-06, 1.89e-06, 1.22e-06), minimum=0.0, maximum=100.0, min_length=3),
+              default=_NOISE.twist_variance, minimum=0.0, maximum=100.0, min_length=3),
     ParamSpec("odometry.twist_slip_gain", "double_array",
               "Twist variance (vx, vy, wz) added per (m/s)^2 of squared RMS contact residual "
-              "[-, -, 1/m^2].", default=(0.378, 0.237, 44.2), minimum=0.0, maximum=1e4,
+              "[-, -, 1/m^2].", default=_NOISE.twist_slip_gain, minimum=0.0, maximum=1e4,
               min_length=3),
     ParamSpec("odometry.twist_lag_gain", "double_array",
               "Twist variance (vx, vy, wz) added per squared lag error of the axis, "
-              "(acceleration x half the twist window)^2 [-].", default=(0.543, 0.571, 0.684),
+              "(acceleration x half the twist window)^2 [-].", default=_NOISE.twist_lag_gain,
               minimum=0.0, maximum=1e4, min_length=3),
     ParamSpec("diagnostics.slip_threshold", "double",
               "Odometry residual of one caster above which it counts as slipping [m/s].",

@@ -534,3 +534,17 @@ def test_the_noise_model_cannot_be_changed_under_a_running_odometry():
     noise = OdometryNoise()
     with pytest.raises(dataclasses.FrozenInstanceError):
         noise.slip_position_gain = 1.0
+
+
+def test_every_noise_term_is_a_parameter_whose_default_is_the_noise_default():
+    """A node started without odometry keys publishes the covariance of
+    OdometryNoise(): each field has a ParamSpec, and its default is the field's."""
+    import dataclasses
+
+    from holonomic_core.config import CONTROLLER_SPECS
+
+    specs = {spec.name: spec for spec in CONTROLLER_SPECS}
+    default = OdometryNoise()
+    for term in dataclasses.fields(OdometryNoise):
+        spec = specs[f"odometry.{term.name}"]
+        assert spec.default == getattr(default, term.name), term.name

@@ -833,8 +833,10 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
                     print(f"written to {path}")
     if plot_path and held_kinds:
         plot(everything, noise, plot_path,
-             f"{robot}: odometry error against the published sigma, fitted on "
-             f"{', '.join(fit_motions)} ({len(recordings)} runs)")
+             f"{robot}: odometry error against the published sigma, "
+             + (f"fitted on {', '.join(fit_motions)}" if fit_noise
+                else "the configured covariance")
+             + f" ({len(recordings)} runs)")
         print(f"plot written to {plot_path}")
     elif plot_path:
         plot(samples, profiles or noise, plot_path,
