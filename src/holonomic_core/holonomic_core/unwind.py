@@ -48,16 +48,18 @@ XR4000, whose 5 cm smallest fillet sets it). A loop's length is ``2 (R -
 rho) cos(delta) + 2 rho (pi / 2 + delta) + R (span + 2 pi k)``, at the
 maneuver's speed ``v = min(0.25 m/s, half the linear speed limits, 0.4 rho
 x the slowest ranged joint's speed limit)`` (on a fillet the joint turns at
-``v / rho``); the duration is the length over ``v`` plus the ramps and the
-final approach (:attr:`UnwindPlan.duration`). The plan states both; the
-simulator tests (test_unwind_sim.py of the simulator package) check them.
+``v / rho``); the duration is the length over ``v`` plus the ramps, the
+final approach and the settling (:attr:`UnwindPlan.duration`). The plan
+states both; the simulator tests (test_unwind_sim.py of the simulator package) check them.
 
 :class:`UnwindManeuver` runs the path closed loop on the odometry, once per
 control cycle: it projects the pose on the path, commands the tangent speed
 (slowing to stop at ``P0``: ``min(v, sqrt(2 a d), 3 d)``, ``d`` the path
 left), a lateral pull onto the path and a heading hold, so that the base
-ends within millimetres of the start pose as the odometry measures it.
-It can be cancelled (a new command, disarm, a fault) and gives up when it
+ends within millimetres of the start pose as the odometry measures it; it
+ends only once the base has stayed there for SETTLE (at rest, not passing
+through), so the motors' lag does not carry it on after the end. It can be
+cancelled (a new command, disarm, a fault) and gives up when it
 makes no progress for STALL_TIME or takes more than twice its planned time.
 """
 
@@ -89,6 +91,11 @@ LATERAL_GAIN, HEADING_GAIN, APPROACH_GAIN = 3.0, 3.0, 3.0
 END_DECELERATION = 0.5
 #: [m], [rad] the base has arrived: distance to the start, heading error
 ARRIVED, ARRIVED_YAW = 0.002, math.radians(0.2)
+#: [s] the base must stay arrived this long (it has come to rest there, not
+#: passed through on its way) before the maneuver ends
+SETTLE = 0.3
+#: [m] this near the start on the last leg the base is settling: no stall rule
+SETTLING = 0.02
 
 
 class UnwindError(ValueError):
@@ -248,8 +255,10 @@ class UnwindPlan:
     @property
     def duration(self) -> float:
         """[s] expected duration: the path at speed, plus the ramps and the
-        final approach (the speed over END_DECELERATION, 3 / APPROACH_GAIN)."""
-        return self.length / self.speed + self.speed / END_DECELERATION + 3.0 / APPROACH_GAIN
+        final approach (the speed over END_DECELERATION, 3 / APPROACH_GAIN)
+        and the settling at the start (SETTLE)."""
+        return (self.length / self.speed + self.speed / END_DECELERATION + 3.0 / APPROACH_GAIN
+                + SETTLE)
 
     def describe(self) -> str:
         turns = ", ".join(f"{j.name} {q:+.2f} -> {e:+.2f} rad"
@@ -403,6 +412,7 @@ class UnwindManeuver:
         self._s = 0.0                      # along the current segment [m]
         self._started = now
         self._progress_at = (0.0, now)     # (path done [m], clock [s]) of the last progress
+        self._arrived_at: float | None = None  # clock [s] since when the base is arrived
         self._cancel: str | None = None
         self._result: tuple[bool, str] | None = None
 
@@ -456,35 +466,44 @@ class UnwindManeuver:
         seg = segs[self._segment]
         s = min(max(self._s, 0.0), seg.length)
         done = self.progress()
-        if done > self._progress_at[0] + 0.001:
+        x0, y0, yaw0 = plan.start
+        yaw_error = wrap_angle(yaw0 - float(pose[2]))
+        left = plan.length - done
+        end_distance = math.hypot(p[0] - x0, p[1] - y0)
+        last = self._segment == len(segs) - 1
+        settling = last and end_distance <= SETTLING
+        if done > self._progress_at[0] + 0.001 or settling:
             self._progress_at = (done, now)
         elif now - self._progress_at[1] > STALL_TIME:
             self._finish(False, f"unwind stalled at {done:.2f} of {plan.length:.2f} m "
                                 "(a joint at its range, or the base blocked)")
             return None
-        x0, y0, yaw0 = plan.start
-        yaw_error = wrap_angle(yaw0 - float(pose[2]))
-        left = plan.length - done
-        end_distance = math.hypot(p[0] - x0, p[1] - y0)
-        if self._segment == len(segs) - 1 and (left <= ARRIVED or self._s >= seg.length) \
-                and end_distance <= ARRIVED and abs(yaw_error) <= ARRIVED_YAW:
+        arrived = last and (left <= ARRIVED or self._s >= seg.length) \
+            and end_distance <= ARRIVED and abs(yaw_error) <= ARRIVED_YAW
+        if not arrived:
+            self._arrived_at = None
+        elif self._arrived_at is None:
+            self._arrived_at = now
+        elif now - self._arrived_at >= SETTLE:
             final = [float(positions[j.index]) - j.middle for j in plan.joints]
             self._finish(True, "unwound: " + ", ".join(
                 f"{j.name} {math.degrees(e):+.1f} deg from the middle"
-                for j, e in zip(plan.joints, final)))
+                for j, e in zip(plan.joints, final))
+                + f"; the base {1000.0 * end_distance:.1f} mm and "
+                  f"{math.degrees(abs(yaw_error)):.2f} deg from its start (odometry)")
             return None
         heading = seg.tangent(s)
         ref = seg.point(s)
         ex, ey = p[0] - ref[0], p[1] - ref[1]
         lateral = -math.sin(heading) * ex + math.cos(heading) * ey
-        if self._segment == len(segs) - 1:
+        if last:
             left = max(0.0, seg.length - self._s)
         speed = min(plan.speed, math.sqrt(2.0 * END_DECELERATION * left), APPROACH_GAIN * left)
         # the pull onto the path scales with the speed near the end, so that
         # the direction of travel (which the joints follow) stays the path's
         pull = -LATERAL_GAIN * lateral * min(1.0, speed / plan.speed + 0.2)
         pull = max(-0.5 * plan.speed, min(0.5 * plan.speed, pull))
-        if self._segment == len(segs) - 1 and self._s > seg.length:
+        if last and self._s > seg.length:
             speed = -APPROACH_GAIN * (self._s - seg.length)     # past the start: back up
         vx_w = speed * math.cos(heading) - pull * math.sin(heading)
         vy_w = speed * math.sin(heading) + pull * math.cos(heading)
