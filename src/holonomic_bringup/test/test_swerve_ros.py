@@ -101,13 +101,18 @@ def test_at_a_zero_command_the_modules_hold_their_headings(swerve, joints):
 
 def test_odometry_tracks_ground_truth_on_a_teleop_like_drive(swerve):
     # forward, strafe, translate while turning, spin, back diagonally: every
-    # change of direction reorients the modules (slip while they turn)
+    # change of direction reorients the modules; the wheels wait for them
+    # (swerve.drive_alignment), so little slips while they turn (with the
+    # wheels driving on at the cosine of the error alone the heading drifts
+    # about 2.4 deg on this script)
     script = [((0.6, 0.0, 0.0), 2.0), ((0.0, 0.5, 0.0), 2.0), ((0.3, 0.3, 0.8), 3.0),
               ((0.0, 0.0, -1.5), 1.5), ((-0.4, 0.2, 0.0), 2.5)]
     distance, error, heading = drive_script(swerve, script)
-    assert distance > 4.0
-    assert error <= 0.03 * distance, (error, distance)
-    assert heading < 0.06, heading
+    print(f"teleop-like drive: {distance:.2f} m, odometry error {1000 * error:.1f} mm, "
+          f"heading {math.degrees(heading):.2f} deg")
+    assert distance > 3.5                 # the script drove (less while the modules turn)
+    assert error <= 0.01 * distance, (error, distance)
+    assert heading < math.radians(2.0), math.degrees(heading)
 
 
 def test_joint_states_and_per_module_slip_in_diagnostics(swerve, joints):

@@ -388,9 +388,11 @@ class BaseController:
             twist = self.joint_acceleration.limit(reading.positions, twist, self.twist_command,
                                                   self.joint_command, self.dt)
         # the twist's rate since the last cycle feeds a steered wheel's turn forward
-        rates = self.model.kinematics.command(reading.positions, twist,
-                                              (twist - self.twist_command) / self.dt)
+        rates, follow = self.model.kinematics.command_and_fraction(
+            reading.positions, twist, (twist - self.twist_command) / self.dt)
         rates, scale = self._saturate(rates, self._max_rates)
+        # a family whose wheels wait for their steering drives that fraction
+        scale = scale * follow
         if self.range_guard is not None:
             # slow down (direction kept) so that no ranged joint passes its range
             keep = self.range_guard.scale(reading.positions, rates, twist * scale, self._clock())

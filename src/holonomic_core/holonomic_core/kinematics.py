@@ -51,6 +51,16 @@ class BaseKinematics(abc.ABC):
         forward with the rate."""
         return self.inverse(positions, twist)
 
+    def command_and_fraction(self, positions: np.ndarray, twist: np.ndarray,
+                             twist_rate: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """:meth:`command`'s joint rates and the fraction in [0, 1] of
+        ``twist`` the base follows with them: 1 for a family that realises
+        any twist at once; a family whose wheels wait while they turn to a
+        new direction (a swerve) drives only that fraction, and the control
+        cycle continues from the twist really commanded, ``fraction *
+        twist``, so the base then accelerates within its limits."""
+        return self.command(positions, twist, twist_rate), 1.0
+
     def with_joint_ranges(self, ranges: Sequence[tuple[float, float] | None]) -> "BaseKinematics":
         """This kinematics for joints with position ranges: ``ranges`` per joint
         in :attr:`joint_names` order, ``(min_position, max_position)`` [rad]

@@ -20,7 +20,18 @@ module's velocity ``v = (vx - wz y, vy + wz x)`` [m/s] and speed ``s = |v|``:
   a base that keeps a line in odom while it spins has a body twist that
   turns, and without it the heading lags by ``theta_dot / k_s``;
 * below ``hold_speed`` [m/s] the module holds its heading (phi_dot = 0) and
-  the wheel takes ``v . e(phi) / r``: no steering about at a zero command.
+  the wheel takes ``v . e(phi) / r``: no steering about at a zero command,
+  or while the command falls to zero; a module whose speed is growing
+  (``v . a > 0``: the base starting in a new direction) turns towards it;
+* the wheels wait for their modules (:func:`drive_fraction`): while a module
+  is more than a small angle from its heading, no rigid motion of the base
+  has every wheel rolling without sliding sideways (a wheel at ``eps`` from
+  its heading scrubs ``s sin(eps)``), and the slip is what the encoders do
+  not see. So every wheel drives the fraction ``kappa`` of its rate,
+  ``kappa = 1`` while the worst error is within a fifth of ``window``
+  (``swerve.drive_alignment``), falling linearly to 0 at ``window``; the
+  controller continues from ``kappa`` times the twist, so the base waits
+  for the modules and then accelerates within its limits.
 """
 
 from __future__ import annotations
@@ -65,15 +76,37 @@ def module_command(vx: float, vy: float, ax: float, ay: float, phi: float, radiu
     the measured heading; ``radius`` [m]; ``gain`` k_s [1/s];
     ``hold_speed`` [m/s]; ``steering_range`` as :func:`choose_heading`.
     """
+    steer, wheel, _ = module_law(vx, vy, ax, ay, phi, radius, gain, hold_speed, steering_range)
+    return steer, wheel
+
+
+def module_law(vx: float, vy: float, ax: float, ay: float, phi: float, radius: float,
+               gain: float, hold_speed: float,
+               steering_range: tuple[float, float] | None = None) -> tuple[float, float, float]:
+    """:func:`module_command` and the module's remaining steering error
+    ``|eps|`` [rad] (0 while it holds its heading)."""
     speed = math.hypot(vx, vy)
     c, s = math.cos(phi), math.sin(phi)
-    if speed < hold_speed:
-        return 0.0, (vx * c + vy * s) / radius
+    if speed == 0.0 or (speed < hold_speed and vx * ax + vy * ay <= 0.0):
+        return 0.0, (vx * c + vy * s) / radius, 0.0
     heading, sign = choose_heading(math.atan2(vy, vx), phi, steering_range)
     error = heading - phi
     wheel = sign * speed * max(math.cos(error), 0.0) / radius
     feed_forward = (vx * ay - vy * ax) / (speed * speed)
-    return gain * error + feed_forward, wheel
+    return gain * error + feed_forward, wheel, abs(error)
+
+
+def drive_fraction(worst_error: float, window: float) -> float:
+    """The fraction ``kappa`` in [0, 1] of their rates the wheels drive when
+    the worst module is ``worst_error`` [rad] from its heading: 1 up to
+    ``window / 5``, 0 from ``window`` [rad] on, linear between; ``window``
+    0: always 1 (the cosine scaling alone)."""
+    if window <= 0.0:
+        return 1.0
+    full = 0.2 * window
+    if worst_error <= full:
+        return 1.0
+    return max(0.0, (window - worst_error) / (window - full))
 
 
 def desaturate(wheel_rates: Sequence[float], max_rates: Sequence[float]) -> tuple[list[float], float]:

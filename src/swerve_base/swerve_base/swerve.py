@@ -39,7 +39,7 @@ import numpy as np
 from holonomic_core.kinematics import BaseKinematics
 from holonomic_core.schema import ConfigError, ParamSpec, number_or_none
 from swerve_base import odometry_fit
-from swerve_base.steering_law import module_command
+from swerve_base.steering_law import drive_fraction, module_law
 
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 #: two steering axes closer than this [m] count as coincident
@@ -48,6 +48,9 @@ MIN_MODULE_DISTANCE = 0.01
 STEERING_GAIN = 8.0
 #: default speed [m/s] of a module below which it holds its heading
 HOLD_SPEED = 0.01
+#: default window [rad] of the wheels' wait for their modules (10 deg): full
+#: speed within 2 deg of every module's heading, none beyond 10 deg
+DRIVE_ALIGNMENT = math.radians(10.0)
 
 
 @dataclass(frozen=True)
@@ -73,8 +76,10 @@ class SwerveKinematics(BaseKinematics):
     """Swerve kinematics: the module command law and the least-squares odometry.
 
     Joint order: ``(m1_steer, m1_wheel, m2_steer, m2_wheel, ...)`` in the
-    order of ``modules`` (the powered caster's). ``steering_gain`` k_s [1/s]
-    and ``hold_speed`` [m/s]: :mod:`swerve_base.steering_law`;
+    order of ``modules`` (the powered caster's). ``steering_gain`` k_s [1/s],
+    ``hold_speed`` [m/s] and ``drive_alignment`` [rad] (the window of
+    :func:`~swerve_base.steering_law.drive_fraction`):
+    :mod:`swerve_base.steering_law`;
     ``steering_ranges``: per module ``(min, max)`` [rad] of its steering
     joint, or None (continuous).
     """
@@ -83,7 +88,8 @@ class SwerveKinematics(BaseKinematics):
 
     def __init__(self, modules: Sequence[Module], steering_gain: float = STEERING_GAIN,
                  hold_speed: float = HOLD_SPEED,
-                 steering_ranges: Sequence[tuple[float, float] | None] | None = None):
+                 steering_ranges: Sequence[tuple[float, float] | None] | None = None,
+                 drive_alignment: float = DRIVE_ALIGNMENT):
         """Validate the geometry; raise :class:`ConfigError` naming the key."""
         modules = tuple(modules)
         if len(modules) < 2:
@@ -111,6 +117,9 @@ class SwerveKinematics(BaseKinematics):
             raise ConfigError("swerve.steering_gain", steering_gain, "a finite number > 0")
         if not (math.isfinite(hold_speed) and hold_speed >= 0):
             raise ConfigError("swerve.hold_speed", hold_speed, "a finite number >= 0")
+        if not (math.isfinite(drive_alignment) and 0.0 <= drive_alignment <= math.pi / 2):
+            raise ConfigError("swerve.drive_alignment", drive_alignment,
+                              "a number in [0, pi/2] (0: the wheels do not wait)")
         ranges = tuple(steering_ranges) if steering_ranges is not None else (None,) * len(modules)
         if len(ranges) != len(modules):
             raise ValueError(f"steering_ranges: one per module ({len(modules)}), "
@@ -123,6 +132,7 @@ class SwerveKinematics(BaseKinematics):
         self.modules = modules
         self.steering_gain = float(steering_gain)
         self.hold_speed = float(hold_speed)
+        self.drive_alignment = float(drive_alignment)
         self.steering_ranges = ranges
         self._names = tuple(n for m in modules for n in (m.steer_joint, m.wheel_joint))
         self.sx = np.array([m.x for m in modules])
@@ -168,20 +178,34 @@ class SwerveKinematics(BaseKinematics):
         """Steering and wheel rates [rad/s] towards ``twist`` (vx, vy, wz) at
         the measured steering angles ``positions`` [rad] (joint order), with
         the twist's rate (ax, ay, alpha) [m/s^2, m/s^2, rad/s^2] feeding the
-        steering forward (None: a constant twist).
-        :func:`swerve_base.steering_law.module_command` per module."""
+        steering forward (None: a constant twist):
+        :func:`swerve_base.steering_law.module_command` per module, every
+        wheel then driving the fraction of :meth:`command_and_fraction`."""
+        return self.command_and_fraction(positions, twist, twist_rate)[0]
+
+    def command_and_fraction(self, positions: np.ndarray, twist: np.ndarray,
+                             twist_rate: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """:meth:`command`'s rates and the fraction ``kappa`` of the twist the
+        wheels drive while the modules turn
+        (:func:`swerve_base.steering_law.drive_fraction` of the worst
+        module's steering error)."""
         q = positions.tolist() if isinstance(positions, np.ndarray) else list(positions)
         vx, vy, wz = float(twist[0]), float(twist[1]), float(twist[2])
         ax, ay, alpha = (0.0, 0.0, 0.0) if twist_rate is None else (
             float(twist_rate[0]), float(twist_rate[1]), float(twist_rate[2]))
-        out = []
+        out, worst = [], 0.0
         for i, (m, rng) in enumerate(zip(self.modules, self.steering_ranges)):
-            steer, wheel = module_command(vx - wz * m.y, vy + wz * m.x,
-                                          ax - alpha * m.y, ay + alpha * m.x,
-                                          q[2 * i], m.wheel_radius, self.steering_gain,
-                                          self.hold_speed, rng)
+            steer, wheel, error = module_law(vx - wz * m.y, vy + wz * m.x,
+                                             ax - alpha * m.y, ay + alpha * m.x,
+                                             q[2 * i], m.wheel_radius, self.steering_gain,
+                                             self.hold_speed, rng)
             out += (steer, wheel)
-        return np.array(out)
+            worst = max(worst, error)
+        rates = np.array(out)
+        fraction = drive_fraction(worst, self.drive_alignment)
+        if fraction < 1.0:
+            rates[1::2] *= fraction
+        return rates, fraction
 
     def inverse(self, positions: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """:meth:`command` for a constant twist: the rates towards ``twist``
@@ -252,6 +276,12 @@ class SwerveKinematics(BaseKinematics):
             ParamSpec("swerve.hold_speed", "double",
                       "Module speed [m/s] below which a module holds its steering angle.",
                       default=HOLD_SPEED, minimum=0.0, maximum=10.0),
+            ParamSpec("swerve.drive_alignment", "double",
+                      "Steering error [rad] at which the wheels wait for their modules: "
+                      "full speed while every module is within a fifth of it of its "
+                      "heading, none beyond it, linear between (a wheel off its heading "
+                      "slides sideways); 0: the wheels never wait.",
+                      default=DRIVE_ALIGNMENT, minimum=0.0, maximum=math.pi / 2),
         ]
         names = params.get("swerve.modules")
         if isinstance(names, (list, tuple)) and all(isinstance(n, str) for n in names):
@@ -291,7 +321,8 @@ class SwerveKinematics(BaseKinematics):
             else:
                 x, y = values[f"swerve.{name}.x"], values[f"swerve.{name}.y"]
             modules.append(Module(name, x, y, values[f"swerve.{name}.wheel_radius"]))
-        return cls(modules, values["swerve.steering_gain"], values["swerve.hold_speed"])
+        return cls(modules, values["swerve.steering_gain"], values["swerve.hold_speed"],
+                   drive_alignment=values["swerve.drive_alignment"])
 
     def with_joint_ranges(self, ranges) -> "SwerveKinematics":
         """A copy whose flip keeps each steering joint inside its range
@@ -299,7 +330,8 @@ class SwerveKinematics(BaseKinematics):
         :attr:`joint_names` order; None: continuous)."""
         by_joint = dict(zip(self.joint_names, ranges))
         return type(self)(self.modules, self.steering_gain, self.hold_speed,
-                          steering_ranges=[by_joint[m.steer_joint] for m in self.modules])
+                          steering_ranges=[by_joint[m.steer_joint] for m in self.modules],
+                          drive_alignment=self.drive_alignment)
 
 
 def check_module_names(names: list[str]) -> None:

@@ -18,7 +18,7 @@ from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
 from holonomic_core.model import load_model
 from holonomic_core.schema import ConfigError
-from swerve_base.steering_law import choose_heading, desaturate, module_command
+from swerve_base.steering_law import choose_heading, desaturate, drive_fraction, module_command
 from swerve_base.swerve import Module, SwerveKinematics
 
 R = 0.075
@@ -43,10 +43,72 @@ def test_spin_turns_each_module_tangent_and_reverses_where_shorter(model):
     # reversed: error -pi/4, steering 8 * (-pi/4) = -6.2832 rad/s, wheel
     # -|v| cos(pi/4) / r = -(0.25 sqrt 2)(sqrt 2 / 2) / 0.075 = -3.3333 rad/s.
     # fr: v = (0.25, 0.25) -> theta = 45 deg, error +pi/4, wheel +3.3333.
-    rates = model.inverse(np.zeros(8), [0.0, 0.0, 1.0])
+    # (the wheels' wait for their modules off: swerve.drive_alignment 0)
+    eager = load_model("swerve4", {"swerve.drive_alignment": 0.0})
+    rates = eager.inverse(np.zeros(8), [0.0, 0.0, 1.0])
     fl, fr = rates[0:2], rates[6:8]
     assert fl == pytest.approx([-8 * math.pi / 4, -0.25 / R])
     assert fr == pytest.approx([8 * math.pi / 4, 0.25 / R])
+    # with the default 10 deg window every module is 45 deg off: the
+    # modules turn at the same rates, the wheels wait (fraction 0)
+    rates, fraction = model.kinematics.command_and_fraction(np.zeros(8), np.array([0.0, 0.0, 1.0]))
+    assert fraction == 0.0
+    assert rates[0::2] == pytest.approx([-2 * math.pi, 2 * math.pi, -2 * math.pi, 2 * math.pi])
+    assert rates[1::2] == pytest.approx([0.0] * 4, abs=1e-15)
+
+
+def test_the_wheels_wait_for_the_worst_module_and_drive_on_as_it_aligns():
+    # window 10 deg: full speed up to 2 deg, none from 10 deg, linear between:
+    # 6 deg -> (10 - 6) / (10 - 2) = 0.5
+    window = math.radians(10.0)
+    assert drive_fraction(math.radians(2.0), window) == 1.0
+    assert drive_fraction(math.radians(6.0), window) == pytest.approx(0.5)
+    assert drive_fraction(math.radians(10.0), window) == 0.0
+    assert drive_fraction(math.radians(45.0), window) == 0.0
+    assert drive_fraction(math.radians(45.0), 0.0) == 1.0      # 0: never wait
+
+
+def test_a_module_turns_towards_a_command_that_grows_from_rest_below_the_hold_speed(model):
+    # 5 mm/s sideways from phi = 0.7, growing (a = (0, 1) m/s^2: v . a > 0):
+    # the module steers towards 90 deg at 8 (pi/2 - 0.7) rad/s + no
+    # feed-forward (a parallel to v); the wheels wait (52 deg off)
+    q = np.array([0.7, 0.0] * 4)
+    rates, fraction = model.kinematics.command_and_fraction(
+        q, np.array([0.0, 0.005, 0.0]), np.array([0.0, 1.0, 0.0]))
+    assert rates[0::2] == pytest.approx([8.0 * (math.pi / 2 - 0.7)] * 4)
+    assert fraction == 0.0 and rates[1::2] == pytest.approx([0.0] * 4, abs=1e-15)
+    # the same speed falling (a = (0, -1)): the module holds its heading
+    rates = model.kinematics.command(q, np.array([0.0, 0.005, 0.0]), np.array([0.0, -1.0, 0.0]))
+    assert rates[0::2] == pytest.approx([0.0] * 4, abs=1e-15)
+
+
+def test_a_spin_from_rest_waits_for_the_modules_then_accelerates_within_its_limits():
+    # the controller on ideal (mock) joints: the modules turn 45 deg first;
+    # while any is more than 10 deg off the base is commanded no motion, then
+    # the twist grows by at most the angular acceleration limit (3 rad/s^2)
+    # per cycle, never with a jump
+    cfg = load_config("swerve4", {"driver": "mock", "cmd_timeout": 0.0})
+    clock = ManualClock()
+    dt = 1.0 / cfg.controller.control_rate
+    with cfg.driver_class(cfg.model, cfg.values, cfg.controller.control_rate, clock=clock) as drv:
+        ctrl = BaseController(cfg, drv, clock=clock)
+        ctrl.request_enable(True)
+        ctrl.step()
+        wz, errors = [], []
+        for _ in range(200):
+            ctrl.set_command((0.0, 0.0, 1.0))
+            clock.now += dt
+            ctrl.step()
+            wz.append(ctrl.twist_command[2])
+            phi = ctrl.reading.positions[0::2]
+            # the tangent headings (mod pi) are -45, 45, -45, 45 deg
+            errors.append(max(abs(math.remainder(p - t, math.pi))
+                              for p, t in zip(phi, np.radians([-45, 45, -45, 45]))))
+    wz, errors = np.array(wz), np.array(errors)
+    waiting = errors > math.radians(10.0) + 0.02
+    assert waiting[:5].all() and np.all(wz[waiting] < 0.02)
+    assert np.all(np.diff(wz) <= 3.0 * dt + 1e-9)
+    assert wz[-1] == pytest.approx(1.0)
 
 
 def test_a_reversal_flips_the_wheel_instead_of_turning_the_module(model):
@@ -234,7 +296,9 @@ def test_the_kinematics_keep_each_module_inside_its_steering_range():
     # = -19.548 rad/s, wheel -cos(140 deg) clipped to 0; b (no range) turns
     # +40 deg: 8 * 0.6981 = 5.585 rad/s, wheel cos 40 / r = 10.214 rad/s
     modules = [Module("a", 0.2, 0.0, R), Module("b", -0.2, 0.0, R)]
-    kin = SwerveKinematics(modules, steering_ranges=[(-math.pi / 2, math.pi / 2 + 0.1), None])
+    # (the wheels' wait for the worst module off, to see each module's own law)
+    kin = SwerveKinematics(modules, steering_ranges=[(-math.pi / 2, math.pi / 2 + 0.1), None],
+                           drive_alignment=0.0)
     phi = math.radians(80)
     t = math.radians(120)
     rates = kin.inverse(np.array([phi, 0.0, phi, 0.0]), np.array([math.cos(t), math.sin(t), 0.0]))
@@ -255,9 +319,11 @@ def test_the_configured_steering_range_bounds_the_flip():
     # at 1 m/s: fl may not turn +40 deg to 120 deg (outside) and reverses to
     # -60 deg (-140 deg of travel): steering 8 * (-140 deg) = -19.548 rad/s,
     # wheel cos(140 deg) < 0 clipped to 0; rl (continuous) turns +40 deg:
-    # 8 * 0.69813 = 5.585 rad/s, wheel cos 40 deg / r = 10.214 rad/s
+    # 8 * 0.69813 = 5.585 rad/s, wheel cos 40 deg / r = 10.214 rad/s (the
+    # wheels' wait for the worst module off, to see each module's own law)
     ranged = load_model("swerve4", {"joints.fl_steer_joint.min_position": -math.pi / 2,
-                                    "joints.fl_steer_joint.max_position": math.pi / 2 + 0.1})
+                                    "joints.fl_steer_joint.max_position": math.pi / 2 + 0.1,
+                                    "swerve.drive_alignment": 0.0})
     assert ranged.kinematics.steering_ranges == ((-math.pi / 2, math.pi / 2 + 0.1),
                                                  None, None, None)
     phi, t = math.radians(80), math.radians(120)
