@@ -17,7 +17,15 @@ Estimators: ``slip_min`` (the fit above), ``robust`` (the fit without the
 one module that alone disagrees: a wheel that spins or skids),
 ``pinv`` (the Moore-Penrose inverse of the wheel rows ``omega_i = e_i .
 v(p_i) / r_i``: fits wheel rates, weighing module i by 1/r_i^2, and ignores
-the sideways component, for comparison).
+the sideways component, for comparison). The wheel rows alone lose rank
+whenever the modules are parallel (driving straight, strafing): the motion
+across the wheels is then unobservable from wheel rates, and with modules
+almost parallel the plain inverse multiplies the encoders' noise by the
+inverse of a near-zero singular value (kilometres of error on a straight
+run). So its inverse is truncated: a direction whose singular value is below
+``PINV_RCOND`` of the largest counts as unobservable and gets the
+minimum-norm answer, no motion across parallel wheels, which is what the
+rolling constraint says there.
 """
 
 from __future__ import annotations
@@ -30,13 +38,18 @@ from holonomic_core.kinematics import ESTIMATORS
 from pcv_base import estimators as rigid
 
 
+#: relative singular value below which ``pinv`` treats a direction of the
+#: twist as unobservable: modules within about 3 deg of parallel
+PINV_RCOND = 0.05
+
+
 def pinv(kin, positions, velocities):
     """Twist fitting the wheel rates [rad/s] in the least-squares sense,
     and the per-module velocity residual norms [m/s] it leaves."""
     phi = positions[0::2]
     c, s = np.cos(phi), np.sin(phi)
     rows = np.column_stack((c, s, kin.sx * s - kin.sy * c)) / kin.r[:, None]
-    twist = np.linalg.lstsq(rows, velocities[1::2], rcond=None)[0]
+    twist = np.linalg.pinv(rows, rcond=PINV_RCOND) @ velocities[1::2]
     vx, vy, wz = twist.tolist()
     u = kin.r * velocities[1::2]
     res = [math.hypot(ui * ci - (vx - wz * y), ui * si - (vy + wz * x))

@@ -226,6 +226,21 @@ def test_odometry_recovers_the_rigid_twist_from_aligned_modules(model):
         assert res == pytest.approx([0.0] * 4, abs=1e-12)
 
 
+def test_pinv_stays_bounded_when_the_modules_are_almost_parallel(model):
+    # driving straight at 1 m/s, the modules' steering encoders 0.2 mrad apart
+    # (+-0.1 mrad) and the wheels 1 % apart: the wheel rows alone cannot see
+    # vy, and their plain inverse divides by the 0.2 mrad spread (vy of order
+    # 0.01 / 2e-4 = 50 m/s); truncated, vy is the minimum-norm 0 and vx, wz
+    # are the wheels' mean and difference: vx = 1.0, wz = 0 (fl, fr: +-0.005)
+    q = np.zeros(8)
+    q[0::2] = [1e-4, -1e-4, 1e-4, -1e-4]
+    rates = np.zeros(8)
+    rates[1::2] = np.array([1.005, 1.0, 1.0, 0.995]) / R
+    twist, _ = model.kinematics.estimate(q, rates, "pinv")
+    assert twist[0] == pytest.approx(1.0, abs=1e-3)
+    assert abs(twist[1]) < 1e-3 and abs(twist[2]) < 0.05
+
+
 def test_odometry_residual_is_the_slip_no_rigid_motion_explains(model):
     # all modules at heading 0, wheels 1/r except fl at 2/r: measured
     # velocities (2, 0), (1, 0), (1, 0), (1, 0). The centroid is the origin, so
