@@ -25,5 +25,10 @@ setup(
             "odrive_can = holonomic_drivers.odrive_can:OdriveCanDriver",
             "cia402 = holonomic_drivers.cia402:Cia402Driver",
         ],
+        # each backend's emulated drive, under the backend's name
+        "holonomic.emulated_drives": [
+            "odrive_can = holonomic_drivers.emulation:EmulatedOdriveAxis",
+            "cia402 = holonomic_drivers.emulated_cia402:EmulatedCia402Drive",
+        ],
     },
 )

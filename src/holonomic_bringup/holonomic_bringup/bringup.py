@@ -163,9 +163,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"holonomic-bringup: {exc}", file=sys.stderr)
         return 2
     from holonomic_bringup.base_controller_node import main as node_main
-    if args.sim_drives and args.driver not in ("odrive_can", "cia402"):
-        print("holonomic-bringup: --sim-drives needs --driver odrive_can or --driver cia402 "
-              f"(got {args.driver or 'the config default'})", file=sys.stderr)
+    from holonomic_core.driver import emulated_drive_names
+    if args.sim_drives and args.driver not in emulated_drive_names():
+        print("holonomic-bringup: --sim-drives needs "
+              + " or ".join(f"--driver {name}" for name in emulated_drive_names())
+              + f" (got {args.driver or 'the config default'})", file=sys.stderr)
         return 2
     if args.fleet is not None:
         problem = ("N must be between 1 and 100" if not 1 <= args.fleet <= 100 else

@@ -63,7 +63,7 @@ BRINGUP = [
     (["hamr", "--fleet", "two"], "invalid int value: 'two'"),
     (["hamr", "--fleet", "2", "--namespace", "r"], "own namespace"),
     (["hamr", "--fleet", "2", "-p", "control_rate:=fast"], "expected a number"),
-    (["hamr", "--sim-drives"], "--sim-drives needs --driver odrive_can or --driver cia402"),
+    (["hamr", "--sim-drives"], "--sim-drives needs --driver cia402 or --driver odrive_can"),
     (["hamr", "--driver", "sim", "--sim-drives"], "--sim-drives needs --driver"),
     (["hamr", "--foxglove", "0"], "--foxglove PORT must be 1..65535"),
     (["hamr", "--foxglove", "http"], "invalid int value: 'http'"),

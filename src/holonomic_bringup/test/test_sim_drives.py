@@ -178,7 +178,7 @@ def test_bringup_refuses_sim_drives_without_a_can_driver(args):
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and "--sim-drives needs --driver odrive_can or --driver cia402" \
+    assert len(lines) == 1 and "--sim-drives needs --driver cia402 or --driver odrive_can" \
         in lines[0]
 
 

@@ -272,3 +272,19 @@ def driver_class(name: str) -> type[Driver]:
     """Resolve a backend name (``holonomic.drivers`` entry point), importing
     its module only now."""
     return plugins.load("drivers", name, "driver")
+
+
+def emulated_drive_names() -> tuple[str, ...]:
+    """Names of the backends that have an emulated drive
+    (``holonomic.emulated_drives`` entry points)."""
+    return plugins.names("emulated_drives")
+
+
+def emulated_drive_class(name: str) -> type:
+    """The emulated drive of backend ``name`` (``holonomic.emulated_drives``
+    entry point, its module imported only now): one device on a python-can
+    ``virtual`` channel, built as ``cls(node_id, channel, **kwargs)``, where
+    ``cls.settings_for(params, joint)`` gives the keyword arguments that the
+    backend's validated parameters describe for a joint. ConfigError on
+    ``driver`` for a backend without one, naming those that have one."""
+    return plugins.load("emulated_drives", name, "driver")

@@ -23,7 +23,10 @@ YAML uses:
 * ``holonomic.drivers``: a :class:`~holonomic_core.driver.Driver` subclass
   per backend (``driver``);
 * ``holonomic.driver_adapters``: functions of a driver class to a driver
-  class (``sim_drives``: a CAN backend on emulated drives).
+  class (``sim_drives``: a CAN backend on emulated drives);
+* ``holonomic.emulated_drives``: the emulated device of a backend that has
+  one (``driver``; ``--sim-drives`` and the CAN test rig run it), a class
+  built as ``cls(node_id, channel, **cls.settings_for(params, joint))``.
 
 Entry points are read once per process (installed packages do not change
 while it runs). Plugins are imported only when used, so that a DDROT user
@@ -47,6 +50,7 @@ GROUPS = {
     "calibration": "holonomic.calibration",
     "drivers": "holonomic.drivers",
     "driver_adapters": "holonomic.driver_adapters",
+    "emulated_drives": "holonomic.emulated_drives",
 }
 
 

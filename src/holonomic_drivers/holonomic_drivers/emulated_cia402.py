@@ -125,6 +125,16 @@ class _Guarding:
 class EmulatedCia402Drive:
     """See the module docstring."""
 
+    @classmethod
+    def settings_for(cls, params, joint: str) -> dict:
+        """The keyword arguments that make this drive the one the validated
+        ``cia402`` parameters ``params`` describe for ``joint``: built from
+        the joint's EDS, else the bus-wide one, else the generic drive, with
+        the joint's encoder resolution (the node id is the caller's)."""
+        base = f"cia402.joints.{joint}"
+        return {"eds": params.get(f"{base}.eds") or params.get("cia402.eds") or None,
+                "encoder_resolution": params[f"{base}.encoder_resolution"]}
+
     def __init__(self, node_id: int, channel: str, eds: str | ObjectDictionary | None = None,
                  *, encoder_resolution: int = 4096, velocity_resolution: float | None = None,
                  max_acceleration: float = 200.0, motor: Motor | Sequence[Motor] | None = None):

@@ -254,6 +254,13 @@ class EmulatedOdriveAxis(EmulatedDevice):
         self._next_heartbeat = -math.inf
         self._last_input = 0.0
 
+    @classmethod
+    def settings_for(cls, params, joint: str) -> dict:
+        """The keyword arguments that make this axis the one the validated
+        ``odrive_can`` parameters ``params`` describe for ``joint`` (the
+        firmware line; the node id is the caller's)."""
+        return {"firmware": params["odrive_can.firmware"]}
+
     @property
     def encoder_period(self) -> float:
         """Period [s] of the cyclic encoder estimates (make it long: the axis

@@ -43,7 +43,7 @@ def odrive_robot(ros, drive_kwargs=None, params=()):
     (more ``Parameter``s); yields (node, probe, devices, sniffer)."""
     folder = tempfile.mkdtemp(prefix="holonomic-can-")
     bus = f"{folder}/bus"
-    host = DriveHost([("odrive", n, dict(drive_kwargs or {})) for n in (0, 1, 2)],
+    host = DriveHost([("odrive_can", n, dict(drive_kwargs or {})) for n in (0, 1, 2)],
                      bus)      # config/hamr.yaml
     devices = host.devices
     sniffer = IpcBus(channel=bus)

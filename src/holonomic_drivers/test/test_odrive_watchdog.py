@@ -393,7 +393,7 @@ def test_killing_the_controlling_process_stops_every_axis_by_its_watchdog(endpoi
     folder = tempfile.mkdtemp(prefix="holonomic-wd-")
     bus = os.path.join(folder, "bus")
     table = odrive_endpoints.load(endpoints_file)
-    host = DriveHost([("odrive", n, {"firmware": "0.6", "endpoints": table})
+    host = DriveHost([("odrive_can", n, {"firmware": "0.6", "endpoints": table})
                       for n in (0, 1, 2)], bus)
     controller = subprocess.Popen([sys.executable, "-c", CONTROLLER, bus, endpoints_file],
                                   stdout=subprocess.PIPE, text=True)

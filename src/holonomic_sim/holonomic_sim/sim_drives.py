@@ -7,9 +7,11 @@ in this process:
   ratios and directions, heartbeats, timeouts, fault handling -- on a private
   python-can ``virtual`` channel (the YAML's ``interface`` and ``channel``
   are ignored);
-* one emulated drive per joint (:mod:`holonomic_drivers.emulation`, the
-  ODrive axis with the YAML's ``odrive_can.firmware``) in a background thread
-  that polls the bus every millisecond;
+* one emulated drive per joint (the backend's ``holonomic.emulated_drives``
+  entry point, as the YAML describes it: the ODrive axis of
+  :mod:`holonomic_drivers.emulation` with the YAML's ``odrive_can.firmware``,
+  the CiA 402 drive of :mod:`holonomic_drivers.emulated_cia402` from the
+  joint's EDS) in a background thread that polls the bus every millisecond;
 * the pybullet simulator (:class:`~holonomic_sim.sim_driver.SimDriver`, all
   ``sim.*`` parameters apply), whose joints are the drives' motors
   (:mod:`holonomic_sim.joint_motor`) through the mechanism's true gear ratio
@@ -45,11 +47,10 @@ import time
 
 import numpy as np
 
-from holonomic_core.driver import Driver, DriverError, DriverFault, JointReading
+from holonomic_core.driver import (Driver, DriverError, DriverFault, JointReading,
+                                   emulated_drive_class, emulated_drive_names)
 from holonomic_core.schema import ConfigError, ParamSpec
 
-#: the backends that can run on simulated drives
-BACKENDS = ("odrive_can", "cia402")
 #: the YAML check: relative tolerance of a joint's reading against the
 #: simulated joint, the least joint travel [rad] it compares over, and how
 #: far [s] a reading may lag the joint (the backends' default feedback
@@ -113,10 +114,11 @@ class PhysicsThread:
 
 def sim_drives_driver(backend: type[Driver]) -> type[Driver]:
     """The ``--sim-drives`` driver class for CAN backend class ``backend``."""
-    if backend.name not in BACKENDS:
+    emulated = emulated_drive_names()
+    if backend.name not in emulated:
         raise ConfigError("sim_drives", True,
                           f"false with driver '{backend.name}' (simulated drives exist for "
-                          f"{' and '.join(BACKENDS)} only)")
+                          f"{' and '.join(emulated)} only)")
     return type(f"SimDrives{backend.__name__}", (SimDrivesDriver,),
                 {"backend": backend, "name": backend.name,
                  "supports_effort": backend.supports_effort})
@@ -208,24 +210,17 @@ class SimDrivesDriver(Driver):
             raise
 
     def _make_drive(self, i: int):
-        from holonomic_drivers.emulated_cia402 import EmulatedCia402Drive
-        from holonomic_drivers.emulation import EmulatedOdriveAxis
         from holonomic_sim.joint_motor import SimulatedJointMotor
 
         joint = self.model.joint_names[i]
         base = f"{self.name}.joints.{joint}"
         motor = SimulatedJointMotor(self._joints, i, self.true_gear_ratios[i],
                                     self.true_directions[i], self.params[f"{base}.position_offset"])
-        node = self.params[f"{base}.node_id"]
-        if self.name == "odrive_can":
-            return EmulatedOdriveAxis(node, self.channel, motor=motor,
-                                      firmware=self.params["odrive_can.firmware"])
-        # the drive as its EDS describes it (the joint's file, else the bus-wide one,
-        # else the generic drive); one emulated device per joint: multi-axis devices
-        # (joints sharing a node id) are not emulated here
-        eds = self.params.get(f"{base}.eds") or self.params.get("cia402.eds") or None
-        return EmulatedCia402Drive(node, self.channel, eds, motor=motor,
-                                   encoder_resolution=self.params[f"{base}.encoder_resolution"])
+        # the drive the YAML describes for the joint; one emulated device per
+        # joint: multi-axis devices (joints sharing a node id) are not emulated here
+        emulated = emulated_drive_class(self.name)
+        return emulated(self.params[f"{base}.node_id"], self.channel, motor=motor,
+                        **emulated.settings_for(self.params, joint))
 
     def _on_activate(self) -> None:
         self.can.activate()

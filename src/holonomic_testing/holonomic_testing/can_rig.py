@@ -30,6 +30,7 @@ import numpy as np
 
 from holonomic_core.config import load_config
 from holonomic_core.controller import BaseController
+from holonomic_core.driver import emulated_drive_class
 from holonomic_core.loop import ControlLoop
 from holonomic_core.realtime import DEFAULT_PRIORITY, set_fifo, tighten_timer_slack
 from holonomic_core.se2 import arc_between
@@ -81,21 +82,18 @@ class CanRig:
         self.driver = self.config.driver_class(self.model, self.config.values,
                                                self.config.controller.control_rate)
         self.node_ids = self.driver.joints.node_ids
-        v = self.config.values
-        if backend == "odrive_can":
-            specs = [("odrive", n, {"firmware": v["odrive_can.firmware"]})
-                     for n in self.node_ids]
-        else:
-            # one emulated device per node, built from the joint's EDS (the
-            # generic drive without one); its velocity unit is what the
-            # file's 0x60A9 says, independent of the driver's parameters
-            specs = []
-            for n in dict.fromkeys(self.node_ids):
-                j = self.model.joint_names[self.node_ids.index(n)]
-                eds = drive_eds or v[f"cia402.joints.{j}.eds"] or v["cia402.eds"] or None
-                specs.append(("cia402", n, {
-                    "eds": eds,
-                    "encoder_resolution": int(v[f"cia402.joints.{j}.encoder_resolution"])}))
+        # one emulated device per node (a multi-axis CiA 402 device serves
+        # the joints that share its node id), as the YAML describes the
+        # node's first joint; a CiA 402 drive's velocity unit is what its
+        # file's 0x60A9 says, independent of the driver's parameters
+        emulated = emulated_drive_class(backend)
+        specs = []
+        for n in dict.fromkeys(self.node_ids):
+            settings = emulated.settings_for(
+                self.config.values, self.model.joint_names[self.node_ids.index(n)])
+            if drive_eds:
+                settings["eds"] = drive_eds
+            specs.append((backend, n, settings))
         try:
             self.host = DriveHost(specs, self.channel, realtime=realtime)
         except BaseException:

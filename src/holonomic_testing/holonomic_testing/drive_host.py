@@ -11,7 +11,8 @@ process (``python -m holonomic_testing.drive_host FD``) that
   :func:`holonomic_core.realtime.request_realtime`) before it starts any
   thread, so the bus and the drives inherit it; when the system refuses,
   one line says so and the drives run without it;
-* builds the drives (:mod:`holonomic_drivers.emulation`,
+* builds the drives (each backend's ``holonomic.emulated_drives`` entry
+  point: :mod:`holonomic_drivers.emulation`,
   :mod:`holonomic_drivers.emulated_cia402`, unchanged) on a virtual channel
   of its own, runs them in an ``EmulatorThread``, and joins that channel
   to the bus the driver opens (:class:`holonomic_testing.ipc_can.BusHub`);
@@ -36,6 +37,8 @@ import threading
 import traceback
 from multiprocessing.connection import Connection
 from typing import Any
+
+from holonomic_core.driver import emulated_drive_class
 
 #: result types sent back by value; anything else stays in the child and is
 #: reached through a Remote
@@ -77,13 +80,17 @@ class DriveHost:
     EmulatorThread), ``realtime`` (None when real-time scheduling was
     granted, else the one-line reason), ``close()``.
 
-    ``specs``: one ``(kind, node_id, kwargs)`` per device, kind "odrive"
-    (``EmulatedOdriveAxis``) or "cia402" (``EmulatedCia402Drive``), kwargs
-    those of the class after the node and channel.
+    ``specs``: one ``(backend, node_id, kwargs)`` per device: the emulated
+    drive of ``backend`` (:func:`holonomic_core.driver.emulated_drive_class`,
+    e.g. "odrive_can", "cia402"), kwargs those of its class after the node
+    and channel. ConfigError, before anything starts, for a backend without
+    an emulated drive.
     """
 
     def __init__(self, specs: list[tuple[str, int, dict]], bus_path: str,
                  realtime: bool = True):
+        for backend, _, _ in specs:
+            emulated_drive_class(backend)
         ours, theirs = socket.socketpair()
         self._conn = Connection(ours.detach())
         self._lock = threading.Lock()
@@ -146,10 +153,8 @@ class DriveHost:
 
 
 def _build(specs, channel: str) -> list:
-    from holonomic_drivers.emulated_cia402 import EmulatedCia402Drive
-    from holonomic_drivers.emulation import EmulatedOdriveAxis
-    kinds = {"odrive": EmulatedOdriveAxis, "cia402": EmulatedCia402Drive}
-    return [kinds[kind](node, channel, **kwargs) for kind, node, kwargs in specs]
+    return [emulated_drive_class(backend)(node, channel, **kwargs)
+            for backend, node, kwargs in specs]
 
 
 def _answer(objects: list, value) -> tuple[str, Any]:
