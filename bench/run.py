@@ -345,29 +345,30 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
 - **1 kHz loop** (docs/realtime.md, "What limits the jitter"). The loop runs in a process of
   its own (the driver, the controller and the simulator; the ROS node is a shell). Each row
   gives the loop's own cycle split: nearly every period over 2 ms is the loop *not running*
-  (woken late, or preempted mid-cycle), not its work (HAMR cycle 0.12 ms p99). What remains:
+  (woken late, or preempted mid-cycle), not its work (the `compute` part). What remains:
   * *without real-time priority* (no SCHED_FIFO, nothing that needs privilege) the loop is
     an ordinary process on two cores with the node, DDS and the bench's own subscriber. It
     asks the normal scheduler for a 0.1 ms time slice (`loop.slice`, Linux 6.12+), so its
     wake-ups preempt those processes instead of waiting for their 1.4 ms slices to end; the
-    node publishes its three 1 kHz topics as pre-serialized messages (about 40 % less CPU
-    per cycle); `python bench/ros_loop.py slice-ab` measures the slice's effect on the
-    wake-up lateness, with and without it in alternating blocks (docs/realtime.md). What a
+    node publishes its three 1 kHz topics as pre-serialized messages (no per-message
+    conversion and serialization in the cycle); `python bench/ros_loop.py slice-ab`
+    measures the slice's effect on the wake-up lateness, with and without it in
+    alternating blocks (docs/realtime.md). What a
     slice cannot change: the loop's share of the CPU when other processes want more
     than two cores, and a kernel that is not preemptible (`Dynamic Preempt: none` at
     boot): a wake-up waits until the running process leaves the kernel;
   * *with SCHED_FIFO* on such a kernel, on a machine shared with other real-time loops of the
     same priority (the other runs' loop processes): a few periods over 2 ms a minute,
-    woken late, for the same reason or behind those loops; 50-52 ms preemptions are the
-    kernel's real-time throttling (950 ms of real-time per second, `sched_rt_runtime_us`);
+    woken late, for the same reason or behind those loops; a preemption of about 50 ms is
+    the kernel's real-time throttling (950 ms of real-time per second, `sched_rt_runtime_us`);
   * *the XR4000 in torque mode*: with the physics in the loop process, pybullet and the drive
     model step inside each cycle (the `controller` part); with `sim.physics_process` (its own
     rows) the physics runs in a process of its own (SCHED_FIFO 49 below a real-time loop), as
     the plant does on a robot, and the cycle is the operational-space torque law (33 µs a call
     with its dynamics compiled, 83 µs on the pure-Python path: `python bench/torque_law.py`).
     numpy's BLAS maps a 32 MiB work buffer on first use (8192 page faults under mlockall,
-    a 12-17 ms `compute` spike if that lands inside a cycle, as the drift watch's first batch
-    would); the loop process sets BLAS up before its first cycle, works
+    a `compute` spike of many periods if that lands inside a cycle, as the drift watch's
+    first batch would); the loop process sets BLAS up before its first cycle, works
     a drift batch off over four cycles, and runs its once-a-second status and collector in
     different cycles (docs/realtime.md; the loop's status keeps its page faults and its slowest
     cycle with its parts: `slowest_*` in the split). With SCHED_FIFO the remaining periods over
@@ -383,8 +384,8 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
     cycle. So the end-to-end p50 is about DDS one-way + 0.04 ms + 0.5 ms, and **the floor
     of a fixed-period 1 kHz loop is DDS one-way + half a period**: the ratio can reach 2×
     only where DDS one-way is above about 0.55 ms. On a shared machine DDS one-way p50 varies
-    from run to run (0.35-0.97 ms, floors of 1.5-2.5×), so the verdict of the row above holds
-    for its run only. Running an extra control cycle when a command arrives would
+    from run to run, and the floor with it, so the verdict of the row above holds for its
+    run only. Running an extra control cycle when a command arrives would
     remove the wait and break the fixed period the limiter, the odometry, the torque law
     and the drives' SYNC and watchdogs are built on; it is not done;
   * *from outside*: the node republishes odom, joint_states and /tf at 1 kHz; on a loaded
@@ -405,7 +406,7 @@ Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['mac
   plausibility checks of every reading, the command timeout. Both paths of
   `HOLONOMIC_HOT_PATH` (docs/hot_path.md) are measured in the same run, objects built under
   each: the compiled closed forms (the ratio that counts) and the pure-Python reference, which
-  stays interpreter-bound (~1 µs per Python operation) at 1.5-3.5× the baseline. The
+  stays interpreter-bound (its ratio is in the row, in brackets). The
   benchmark also checks that both controllers end with the same joint commands and pose.
   `python bench/run.py --only compute` re-runs these two rows alone.
 - **1 kHz loop** (`python bench/run.py --only loop` re-runs these rows and the latency):

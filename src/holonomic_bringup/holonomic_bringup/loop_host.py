@@ -45,11 +45,12 @@ import numpy as np
 from holonomic_bringup import loop_wire as wire
 
 #: how long before each deadline the loop stops sleeping and busy-waits [s].
-#: At 1 kHz under SCHED_FIFO with a 1 µs timer slack, a sleep to the deadline
-#: wakes about 50 µs late (p99; bench/ros_loop.py shows it); 200 µs of
-#: spinning holds the period to p99 1.001 ms but burns 20 % of a core at
+#: A sleep to the deadline wakes late by the scheduler's wake-up latency
+#: (``woke late`` in the 1 kHz loop rows of docs/benchmarks.md, ``make
+#: bench``); spinning longer covers more of it but burns more of a core at
 #: real-time priority (the core DDS and the node share, and real-time time
-#: the kernel throttles at 95 %); 60 µs covers the usual lateness for 6 %.
+#: the kernel throttles at 95 %). 60 µs covers the usual lateness under
+#: SCHED_FIFO with a 1 µs timer slack for 6 % of a core at 1 kHz.
 LOOP_SPIN = 6e-5
 #: consecutive failed cycles after which the loop gives up (motors stay off)
 MAX_CONSECUTIVE_ERRORS = 50
@@ -254,8 +255,9 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
             r.pending.append((r.controller.request_enable(True), None))
     # The once-a-second work in different cycles, never stacked in one: each
     # robot's status at its own phase of the second, the collector halfway
-    # between the first two (status 0.5-0.7 ms, gc 0.1-0.3 ms: together with
-    # a slow control step they would overrun the 1 ms period)
+    # between the first two (each takes a sizeable part of the 1 ms period:
+    # together with a slow control step they would overrun it; ``status`` and
+    # ``gc`` in the loop's cycle split, docs/benchmarks.md)
     diag_every = robots[0].diag_every
     for r in robots:
         r.status_phase = (r.index * r.diag_every) // len(robots)
@@ -383,11 +385,11 @@ def run_host(setup: HostSetup, sock: socket.socket, heartbeat: memoryview,
     # triggered by allocation counts in the middle of a cycle: the loop
     # collects once a second itself (`gc` in the cycle split). In a
     # thread of the node's process (in_process) the collector is the node's.
-    # The first status costs 10-25 ms (numpy's percentile and pickle set
+    # The first status costs many periods (numpy's percentile and pickle set
     # themselves up on first use): pay it here, not in the cycle a second in.
     # So is numpy's BLAS work buffer: mapped by the first matrix product
-    # that needs it, 10-37 ms under mlockall; otherwise the PCV's drift watch
-    # would pay it in a cycle about 2 s after the base first moves.
+    # that needs it, page by page under mlockall; otherwise the PCV's drift
+    # watch would pay it in a cycle about 2 s after the base first moves.
     warm_up_linear_algebra()
     warm = LoopStats(window=2)
     warm.add(0.0, 0.0)

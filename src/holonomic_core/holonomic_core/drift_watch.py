@@ -18,11 +18,10 @@ mode): stiff velocity loops impose the configured kinematics on the joints
 and the floor takes the conflict as slip (see docs/calibration.md).
 
 The watch runs inside the 1 kHz control cycle, and a batch's work (the
-residual, its Jacobian, the solve) costs about 1-2 ms of CPU, more than a
-whole cycle. So a full batch is worked off one
-stage per :meth:`DriftWatch.update` call, over the next four calls. Each
-stage is a few hundred microseconds; the numbers are the same, a few
-milliseconds later (docs/realtime.md).
+residual, its Jacobian, the solve) takes more CPU than a whole cycle has.
+So a full batch is worked off one stage per :meth:`DriftWatch.update` call,
+over the next four calls, each a fraction of a cycle; the numbers are the
+same, a few milliseconds later (docs/realtime.md).
 """
 
 from __future__ import annotations

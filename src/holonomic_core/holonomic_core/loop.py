@@ -1,12 +1,11 @@
 """A fixed-rate loop in its own thread, paced by absolute deadlines.
 
-rclpy timers drop missed ticks and jitter by milliseconds under load (a
-``create_timer(0.001)`` in a single-threaded executor runs at ~975 Hz with a
-p99 period of 1.1-3 ms, ~740 Hz once the executor also publishes and
-subscribes); a thread that sleeps to absolute
-deadlines ``t0 + k T`` (and busy-waits the last ``spin`` seconds) holds
-1 kHz (p99 period 1.00-1.03 ms; ``make bench`` measures this loop in the
-base controller under traffic, docs/benchmarks.md). If a cycle overruns
+rclpy timers drop missed ticks, and their period jitters with whatever
+else the executor runs (a timer shares its thread with the publishers and
+subscriptions); a thread that sleeps to absolute deadlines ``t0 + k T``
+(and busy-waits the last ``spin`` seconds) holds its rate (``make bench``
+measures this loop in the base controller under traffic,
+docs/benchmarks.md). If a cycle overruns
 by more than a whole period the loop does not try to catch up with a burst
 of cycles: it counts the miss and re-anchors its deadlines to now.
 """
@@ -70,8 +69,8 @@ class ManualClock:
 
 def _percentile(values: np.ndarray, q: float) -> float:
     """numpy's default (linear) percentile ``q`` [%] of ``values``, by two
-    partitions: ~10 µs for 2000 values against ~50 µs for ``np.percentile``
-    (the loop computes ten of them once a second, inside a cycle)."""
+    partitions, without ``np.percentile``'s general-purpose overhead (the loop
+    computes ten of them once a second, inside a cycle)."""
     n = values.size
     position = q / 100.0 * (n - 1)
     low = int(position)
@@ -97,7 +96,7 @@ class LoopStats:
     from the diagnostics alone. The minor page faults of all cycles are
     counted too: under mlockall a cycle should take none, and a fault means
     something mapped memory inside the cycle (numpy's BLAS work buffer would,
-    for 10-37 ms, were it not set up before the first cycle:
+    for many periods, were it not set up before the first cycle:
     :func:`holonomic_core.realtime.warm_up_linear_algebra`).
     """
 
@@ -271,7 +270,7 @@ class ControlLoop:
     def _run(self) -> None:
         clock = time.perf_counter
         cpu_clock = time.thread_time      # this thread's CPU time: compute vs preempted
-        usage = resource.getrusage        # minor page faults: ~1 µs a call
+        usage = resource.getrusage        # minor page faults: one system call
         thread = resource.RUSAGE_THREAD
         deadline = clock()
         last: float | None = None

@@ -81,16 +81,15 @@ def warm_up_linear_algebra() -> None:
     call that needs one and then keeps it. Products of 2x2 and 3x3 matrices
     don't need it; ``A.T @ A`` (syrk) or an LU solve do. Under
     ``mlockall(MCL_FUTURE)`` (:func:`lock_memory`) that mapping is faulted in
-    and locked page by page inside the call: 8192 minor faults and 10-37 ms
-    of CPU (more as a fresh process's first call than inside the loop), against 0.15 ms
-    unlocked -- ten or more 1 ms cycles' worth. In the loop, the first such
+    and locked page by page inside the call: 8192 minor faults (32 MiB of
+    4 KiB pages), many 1 ms cycles' worth of CPU. In the loop, the first such
     call is the PCV's drift watch's first batch, about 2 s after the base
-    first moves, where it would show as a 12-17 ms "controller" part
-    (docs/realtime.md). The first SVD also sets itself up (about 1 ms more).
-    Each routine here is one the cycle can reach: the drift watch's ``J.T @ J``,
-    ``pinv`` and ``solve``, the torque law's ``pinv`` distribution, and the
-    estimators' ``lstsq``. Without mlockall it costs about 0.2 ms. It leaves
-    the buffer mapped, and locked under mlockall.
+    first moves, where it would show as a long "controller" part
+    (docs/realtime.md). The first SVD also sets itself up. Each routine here
+    is one the cycle can reach: the drift watch's ``J.T @ J``, ``pinv`` and
+    ``solve``, the torque law's ``pinv`` distribution, and the estimators'
+    ``lstsq``. It leaves the buffer mapped, and locked under mlockall
+    (test_realtime: after the warm-up the drift watch maps no new memory).
     """
     import numpy as np
 
@@ -121,7 +120,9 @@ _SCHED_ATTR_SYSCALLS = {"x86_64": (314, 315), "aarch64": (274, 275), "arm64": (2
 #: the slice the kernel accepts (kernel/sched/syscalls.c clamps to 0.1-100 ms) [s]
 SLICE_MIN, SLICE_MAX = 1e-4, 0.1
 #: the loop's slice on the normal scheduler [s]: the shortest the kernel
-#: grants; a HAMR cycle computes 0.1-0.2 ms (docs/realtime.md)
+#: grants, so that the loop's wake-ups get the earliest virtual deadline; a
+#: cycle's compute is of that order (the ``compute`` part of the 1 kHz loop
+#: rows in docs/benchmarks.md, ``make bench``)
 DEFAULT_SLICE = SLICE_MIN
 
 

@@ -344,8 +344,8 @@ class SimRobot:
         self._drive_velocities = [state[1] for state in states]
         self.drives.record_states(states)
         if self._base_history is not None:
-            # two calls per physics step, only with a delay: ~4 us together,
-            # against ~100 us for an XR4000 drive-model step
+            # two calls per physics step, only with a delay: small beside the
+            # drive-model step they accompany
             self._base_history.append((_base_pose(self.body, physicsClientId=self._client),
                                        _base_velocity(self.body, physicsClientId=self._client)))
 
