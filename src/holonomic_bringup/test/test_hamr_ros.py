@@ -79,12 +79,10 @@ def test_odometry_stays_within_0_2_percent_of_distance_over_20_s(hamr):
     # (0.044 %), heading 0.0018 rad; bounds ~5x that: a kinematic or
     # odometry error of a fraction of a percent fails
     assert error <= 0.002 * distance, (error, distance)
-    # heading, measured at 7abb383 (2026-11-26, 11 runs of this script: alone,
-    # in the whole file, with two busy loops beside, on the drive model, on
-    # Python 3.12): 0.0003-0.0027 rad. On a machine loaded by other test
-    # sessions (load average 7-8, the loop process among other SCHED_FIFO
-    # loops) 0.0122 and 0.0142 rad were measured (2026-11-26, the loop-process
-    # branch), and one fresh-clone CI run saw 0.0136: the test's cmd_vel
+    # heading, measured over 11 runs of this script (alone, in the whole
+    # file, with two busy loops beside, on the drive model, on Python 3.12):
+    # 0.0003-0.0027 rad; on a machine loaded by other test sessions (the loop
+    # process among other SCHED_FIFO loops) up to 0.0142 rad: the test's cmd_vel
     # arrives on the wall clock while the simulation steps with the loop, so a
     # starved machine changes the drive itself. Bound: under 2x the loaded
     # worst (the distance bound above still catches a fraction of a percent).

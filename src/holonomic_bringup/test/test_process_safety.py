@@ -148,8 +148,8 @@ def test_a_10_khz_cmd_vel_flood_for_30_s_keeps_the_loop_rate_and_memory(ros, sta
         # the latest command wins: after the flood, its final twist (sent
         # for 3 s) is what the base does. The flood ends 30 s after the
         # publisher's own start-up, which takes seconds on a loaded machine
-        # (the final command was missed by a 4 s wait from the test's 30 s,
-        # 2026-11-26, two busy loops at load 11-16): wait for its word.
+        # (a 4 s wait from the test's own 30 s can miss the final command):
+        # wait for its word.
         deadline, said = time.monotonic() + 60.0, []
         while "final command" not in said:
             wait_until(lambda: select.select([flood.stdout], [], [], 0.0)[0],
@@ -164,10 +164,8 @@ def test_a_10_khz_cmd_vel_flood_for_30_s_keeps_the_loop_rate_and_memory(ros, sta
         sent_rate = float(out.split(":")[-1].split()[0])
         assert sent_rate > 8000, out               # the flood really happened
         # the loop kept its 200 Hz (diagnostics' rate over the last second);
-        # 170 Hz: 178-198 Hz measured in a fresh-clone CI run at this merge
-        # (2026-11-26) -- the cycle grew (windowed twist, drift watch) and
-        # shares the GIL with the executor's 10 kHz callbacks; taking the loop
-        # out of the executor's GIL is the open 1 kHz-loop work
+        # 170 Hz: 178-198 Hz measured in fresh-clone CI runs, the flood
+        # publisher and the node's 10 kHz callbacks taking CPU beside the loop
         assert min(rates[3:]) > 170.0, rates
         # memory does not grow with the number of messages (300 000 of them)
         assert max(rss) - rss_start < 20 * 1024, (rss_start, rss)

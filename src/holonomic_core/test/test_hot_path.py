@@ -19,7 +19,7 @@ not, and are compared to a tolerance a few times the measured difference:
   2e-14; and its covariance, whose lag term divides the twist's difference
   by the window (measured <= 4.5e-14 of the largest variance; tolerance 2e-13).
 
-Measured with this file's inputs (python -c loop over _odometry_states, 2026-11-26).
+Measured with this file's inputs (a python -c loop over _odometry_states).
 """
 
 from __future__ import annotations
