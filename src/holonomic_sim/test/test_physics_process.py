@@ -217,7 +217,7 @@ def test_a_bad_sim_value_found_in_the_physics_process_is_the_same_config_error()
     ({"loop.realtime": True, "loop.process": True, "loop.priority": 1}, None),   # no room below
 ])
 def test_the_plant_runs_real_time_just_below_a_real_time_loop_only(loop, expected):
-    from holonomic_sim.physics_process import plant_priority
+    from holonomic_sim.physics_plant import plant_priority
 
     assert plant_priority(loop) == expected
 
