@@ -25,7 +25,7 @@ setup(
         "console_scripts": [
             "holonomic-bringup = holonomic_bringup.bringup:main",
             "holonomic-demo = holonomic_bringup.demo:main",
-            "holonomic-drive-test = holonomic_bringup.drive_test:main",
+            "holonomic-drive-test = holonomic_bringup.drive_step:main",
             "holonomic-teleop = holonomic_bringup.teleop:main",
             "holonomic-plot = holonomic_bringup.recording_plot:main",
             "holonomic-ctl = holonomic_bringup.ctl:main",

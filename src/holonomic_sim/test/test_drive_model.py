@@ -9,7 +9,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from holonomic_bringup.drive_test import main as drive_test
+from holonomic_bringup.drive_step import main as drive_test
 from holonomic_core.config import load_config
 from holonomic_core.step_response import step_response
 from holonomic_sim.contact_forces import internal_force
