@@ -32,6 +32,11 @@ of the config's own covariance. :func:`simulate` is also the offline driver
 of the self-calibration experiment (a calibration overlay for the
 controller only, the simulated robot built from the drawing and its hidden
 errors, as holonomic-bringup builds it: :mod:`holonomic_core.nominal`).
+
+The runs, and with ``--calibrate`` or ``--check`` the replays of the
+odometry over them, report their progress on stderr
+(:mod:`holonomic_core.progress`): a bar with the time left on a terminal,
+plain lines with the time left in a log. The tables stay on stdout.
 """
 
 from __future__ import annotations
@@ -582,11 +587,15 @@ def main(argv: list[str] | None = None) -> int:
             json.dump([t.__dict__ for t in trials], handle, indent=1)
     if recordings:
         from holonomic_sim.odometry_calibration import calibrate_main
-        calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot,
-                       per_floor=True, profile_dir=args.profiles, floor_names=PROFILE_NAMES,
-                       default_floors=args.default_floor, fit_motions=fit_motions,
-                       command=" ".join(["holonomic-odometry-experiment",
-                                         *(argv if argv is not None else sys.argv[1:])]))
+        # the replays of the odometry over every run: the long part of --calibrate
+        with progress(len(recordings), "holonomic-odometry-experiment replay",
+                      "recordings") as bar:
+            calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot,
+                           per_floor=True, profile_dir=args.profiles,
+                           floor_names=PROFILE_NAMES, default_floors=args.default_floor,
+                           fit_motions=fit_motions, bar=bar,
+                           command=" ".join(["holonomic-odometry-experiment",
+                                             *(argv if argv is not None else sys.argv[1:])]))
     return 0
 
 

@@ -76,3 +76,20 @@ def test_the_odometry_paths_of_a_calibration_are_counted_with_their_lines_above(
     assert lines[3].startswith("holonomic-calibration-experiment: 1/2 steps (50 %)")
     assert "about" in lines[3] and lines[2].strip().startswith("faults, calibrated   path 0")
     assert lines[7].endswith(", done") and "path 1" in lines[6]
+
+
+def test_odometry_experiment_logs_the_replays_of_its_calibration():
+    # --calibrate replays the odometry over every run: two 2 s runs, a second or two
+    proc = subprocess.run(
+        [sys.executable, "-m", "holonomic_sim.odometry_experiment", "--robot", "hamr",
+         "--seeds", "2", "--duration", "2", "--condition", "nominal", "--calibrate"],
+        capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "\r" not in proc.stderr
+    replay = [line for line in proc.stderr.splitlines()
+              if line.startswith("holonomic-odometry-experiment replay: ")]
+    assert len(replay) == 2, proc.stderr
+    assert re.fullmatch(r"holonomic-odometry-experiment replay: 1/2 recordings \(50 %\), \d+ s "
+                        r"elapsed, about \d+ s left", replay[0]), replay[0]
+    assert replay[1].endswith(", done")
+    assert "calibrated parameters" in proc.stdout and "replay:" not in proc.stdout
