@@ -7,6 +7,10 @@ over many samples, and the page records what one run measured.
 
 Usage: python bench/run.py [--quick] [--out docs/benchmarks.md]
 (--quick: shorter runs, for trying changes; the page says so.)
+
+Progress over the benchmarks goes to stderr (holonomic_core.progress): a bar
+with the time left on a terminal, in a log a plain line with the benchmarks
+done and the time left after each one, below that benchmark's own line.
 """
 
 from __future__ import annotations
@@ -26,6 +30,14 @@ sys.path.insert(0, str(HERE))
 
 import compute  # noqa: E402  (bench/ is not a package)
 import ros_loop  # noqa: E402
+
+from holonomic_core.progress import Progress, progress  # noqa: E402
+
+#: the robots of the per-robot rows (cycle compute, simulation speed)
+ROBOTS = ("hamr", "xr4000")
+#: benchmarks (calls of the step function) of a whole run and of each --only
+STEPS = {"compute": len(ROBOTS), "sim": 2 * len(ROBOTS), "loop": 2, "latency": 1}
+STEPS_ALL = STEPS["compute"] + STEPS["sim"] + 1 + STEPS["loop"] + 2   # + fleet, memory, foxglove
 
 
 def machine() -> str:
@@ -50,14 +62,23 @@ def machine() -> str:
             f"pybullet {version('pybullet')}, rclpy (ROS 2 Jazzy wheels)")
 
 
-def _step(name, fn, *a, **kw):
-    """Run one benchmark, logging it on stderr."""
-    t0 = time.monotonic()
-    print(f"bench: {name} ...", file=sys.stderr, flush=True)
-    value = fn(*a, **kw)
-    print(f"bench: {name}: {json.dumps(value)} ({time.monotonic() - t0:.0f} s)",
-          file=sys.stderr, flush=True)
-    return value
+def stepper(bar: Progress):
+    """The step function of a run: it runs one benchmark, logs it on stderr
+    (its name when it starts, its result and time when it ends, above the
+    bar on a terminal) and counts it in ``bar``."""
+    def step(name, fn, *a, **kw):
+        t0 = time.monotonic()
+        bar.write(f"bench: {name} ...")
+        value = fn(*a, **kw)
+        bar.write(f"bench: {name}: {json.dumps(value)} ({time.monotonic() - t0:.0f} s)")
+        bar.advance()
+        return value
+    return step
+
+
+def bench_progress(total: int) -> Progress:
+    """The progress display of ``total`` benchmarks on stderr."""
+    return progress(total, "bench", "benchmarks")
 
 
 def verdict(ok: bool) -> str:
@@ -79,15 +100,17 @@ def main(argv=None) -> int:
     if args.only:
         saved = json.loads(args.out.with_suffix(".json").read_text())
         t0 = time.monotonic()
-        if args.only == "sim":
-            saved["results"]["sim"] = sim_rows(_step, args.quick)
-            saved["results"]["sim_drive"] = sim_drive_rows(_step, args.quick)
-        elif args.only == "compute":
-            saved["results"]["compute"] = compute_rows(_step, args.quick)
-        elif args.only == "latency":
-            saved["results"]["latency"] = latency_row(_step, args.quick)
-        else:
-            saved["results"].update(loop_rows(_step, args.quick))
+        with bench_progress(STEPS[args.only]) as bar:
+            step = stepper(bar)
+            if args.only == "sim":
+                saved["results"]["sim"] = sim_rows(step, args.quick)
+                saved["results"]["sim_drive"] = sim_drive_rows(step, args.quick)
+            elif args.only == "compute":
+                saved["results"]["compute"] = compute_rows(step, args.quick)
+            elif args.only == "latency":
+                saved["results"]["latency"] = latency_row(step, args.quick)
+            else:
+                saved["results"].update(loop_rows(step, args.quick))
         saved.setdefault("reruns", {})[args.only] = (
             datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
             + f" on: {machine()}")
@@ -110,22 +133,23 @@ def main(argv=None) -> int:
     started = time.monotonic()
     results: dict = {}
 
-    step = _step
-    results["compute"] = compute_rows(step, quick)
-    results["sim"] = sim_rows(step, quick)
-    results["sim_drive"] = sim_drive_rows(step, quick)
-    results["fleet"] = step("fleet", compute.fleet_speed, "hamr",
-                            (1, 4, 8) if quick else (1, 2, 4, 8, 16, 24, 32, 40, 48),
-                            2.0 if quick else 3.0)
-    import rclpy
-    rclpy.init()
-    try:
-        results.update(loop_rows(step, quick, init=False))
-        results["memory"] = step("memory", ros_loop.memory_growth, 75.0 if quick else 240.0)
-        results["foxglove"] = step("foxglove bridge cost", ros_loop.foxglove_cost,
-                                   10.0 if quick else 30.0, 1 if quick else 2)
-    finally:
-        rclpy.try_shutdown()
+    with bench_progress(STEPS_ALL) as bar:
+        step = stepper(bar)
+        results["compute"] = compute_rows(step, quick)
+        results["sim"] = sim_rows(step, quick)
+        results["sim_drive"] = sim_drive_rows(step, quick)
+        results["fleet"] = step("fleet", compute.fleet_speed, "hamr",
+                                (1, 4, 8) if quick else (1, 2, 4, 8, 16, 24, 32, 40, 48),
+                                2.0 if quick else 3.0)
+        import rclpy
+        rclpy.init()
+        try:
+            results.update(loop_rows(step, quick, init=False))
+            results["memory"] = step("memory", ros_loop.memory_growth, 75.0 if quick else 240.0)
+            results["foxglove"] = step("foxglove bridge cost", ros_loop.foxglove_cost,
+                                       10.0 if quick else 30.0, 1 if quick else 2)
+        finally:
+            rclpy.try_shutdown()
     elapsed = time.monotonic() - started
     table = format_table(results)
     print(table + "\n" + latency_block(results))
@@ -141,7 +165,7 @@ def compute_rows(step, quick: bool) -> list[dict]:
     """Control-cycle compute, compiled and pure-Python paths, against the baseline."""
     cycles = 20_000 if quick else 100_000
     return [step(f"cycle compute {r}", compute.cycle_compute, r, cycles)
-            for r in ("hamr", "xr4000")]
+            for r in ROBOTS]
 
 
 def loop_rows(step, quick: bool, init: bool = True) -> dict:
@@ -176,14 +200,14 @@ def latency_row(step, quick: bool) -> dict:
 def sim_rows(step, quick: bool) -> list[dict]:
     """Simulation speed with ideal motors (``sim.ideal_motors``) against raw pybullet."""
     return [step(f"simulation speed {r}", compute.simulation_speed, r, 5.0 if quick else 20.0)
-            for r in ("hamr", "xr4000")]
+            for r in ROBOTS]
 
 
 def sim_drive_rows(step, quick: bool) -> list[dict]:
     """Simulation speed with the drive model on every joint (the default of
     ``--driver sim``) against raw pybullet."""
     return [step(f"simulation speed {r}, drive model", compute.simulation_speed, r,
-                 5.0 if quick else 20.0, ideal_motors=False) for r in ("hamr", "xr4000")]
+                 5.0 if quick else 20.0, ideal_motors=False) for r in ROBOTS]
 
 
 def format_table(r: dict) -> str:
@@ -335,6 +359,8 @@ def write_page(path: Path, table: str, saved: dict, elapsed: float, quick: bool)
 rewrites this page (and `docs/benchmarks.json`, the raw results). It is not part of `make test`:
 timings on a shared machine are noisy, so every target is a ratio measured within one run (ours
 against a baseline or the raw library, in alternating blocks) or a percentile over many samples.
+While it runs, its progress over the benchmarks goes to stderr: a bar with the time left on a
+terminal, and in a log a plain line with the benchmarks done and the time left after each one.
 
 Run {saved['when']}{' (--quick: shorter runs)' if quick else ''} on: {saved['machine']}.
 {''.join(f"Rows `{k}` re-run with `--only {k}` {v}." + chr(10) for k, v in saved.get('reruns', {}).items())}

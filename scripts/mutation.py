@@ -46,7 +46,9 @@ Usage (from the repository, with ros2_ws/env.sh sourced; `make mutation`):
     python scripts/mutation.py --planted [NAME ...]  # the planted bugs (default: all)
 Prints a table per module, writes the diff of every surviving mutant to
 out/mutation/<module>.txt and the killed ones to out/mutation/<module>.json
-(what --again starts from).
+(what --again starts from). While a module's mutants run, its progress goes
+to stderr (holonomic_core.progress): a bar with the time left on a terminal,
+in a log a plain line with the mutants tested and the time left every 5 %.
 """
 
 from __future__ import annotations
@@ -390,11 +392,12 @@ def run_module(work: Path, name: str, out: Path, budget: float | None,
     proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--worker",
                              str(job_file)], cwd=work, env=env, stdout=log,
                             stderr=subprocess.STDOUT, start_new_session=True)
-    while proc.poll() is None:
-        time.sleep(1.0)
-        if budget is not None and time.monotonic() - started > budget:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+    # imported here, in this process only: the worker imports none of our
+    # packages before its children, which import the mutated module afresh
+    from holonomic_core.progress import progress
+    with progress(len(job_mutants), f"mutation {name}", "mutants") as bar:
+        wait_worker(proc, results_file, bar,
+                    None if budget is None else started + budget)
     log.close()
     if proc.returncode not in (0, -signal.SIGKILL):
         raise SystemExit(f"mutation: the worker failed on {name} (see {out / name}.log)")
@@ -427,6 +430,35 @@ def run_module(work: Path, name: str, out: Path, budget: float | None,
     counts["mutants"] = len(found)
     counts["seconds"] = round(time.monotonic() - started)
     return counts
+
+
+def wait_worker(proc: subprocess.Popen, results_file: Path, bar, deadline: float | None,
+                poll: float = 1.0) -> None:
+    """Wait for the worker ``proc``, killing its session at ``deadline``
+    (time.monotonic() [s], None: never). ``bar`` (holonomic_core.progress)
+    advances once per mutant the worker has reported (a line each of
+    ``results_file``); the mutants a stopped worker did not reach are
+    skipped, so the display ends."""
+    reported = 0
+
+    def catch_up() -> None:
+        nonlocal reported
+        try:
+            lines = results_file.read_bytes().count(b"\n")
+        except FileNotFoundError:           # no mutant reported yet
+            lines = 0
+        if lines > reported:
+            bar.advance(lines - reported)
+            reported = lines
+
+    while proc.poll() is None:
+        time.sleep(poll)
+        catch_up()
+        if deadline is not None and time.monotonic() > deadline:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    catch_up()
+    bar.skip(bar.total - bar.done)
 
 
 # -- planted bugs ---------------------------------------------------------------

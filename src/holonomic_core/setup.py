@@ -34,7 +34,7 @@ setup(
         ("share/" + PACKAGE + "/config", CONFIGS),
     ],
     ext_modules=[HOT_PATH],
-    install_requires=["setuptools", "numpy"],
+    install_requires=["setuptools", "numpy", "tqdm"],
     # colcon test runs pytest (not unittest) on test/ when pytest is a test dependency
     extras_require={"test": ["pytest"]},
     zip_safe=False,

@@ -16,6 +16,11 @@ of the recorded ``joint_states``.
 The reference's own frame does not matter: poses are taken relative to the
 reference's first pose. Its twist must be in base_link (as nav_msgs/Odometry
 specifies); without one (all zeros) the twist coverage is meaningless.
+
+Reading each recording and replaying the odometry over it take seconds per
+minute of driving: the progress over them goes to stderr
+(holonomic_core.progress), a bar with the time left on a terminal, plain
+lines with the time left in a log.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ import numpy as np
 from holonomic_bringup.recording_plot import odom_arrays, load
 from holonomic_core.command_line import ArgumentParser
 from holonomic_core.config import config_from_flat
+from holonomic_core.progress import progress
 from holonomic_core.schema import ConfigError
 from holonomic_core.se2 import relative_poses, wrap_angle
 
@@ -87,13 +93,15 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from holonomic_sim.odometry_calibration import calibrate_main
 
-    try:
-        recordings = [recording_from_mcap(f, args.namespace, args.reference_topic)
-                      for f in args.files]
-    except (ConfigError, OSError, ValueError) as exc:
-        print(f"holonomic-odometry-calibrate: {exc}", file=sys.stderr)
-        return 2
-    calibrate_main(recordings, fit_noise=True, plot_path=args.plot)
+    # the steps: reading each recording, then replaying the odometry over each
+    with progress(2 * len(args.files), "holonomic-odometry-calibrate", "steps") as bar:
+        try:
+            recordings = [recording_from_mcap(f, args.namespace, args.reference_topic)
+                          for f in bar.over(args.files)]
+        except (ConfigError, OSError, ValueError) as exc:
+            bar.write(f"holonomic-odometry-calibrate: {exc}")
+            return 2
+        calibrate_main(recordings, fit_noise=True, plot_path=args.plot, bar=bar)
     return 0
 
 

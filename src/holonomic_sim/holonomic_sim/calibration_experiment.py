@@ -11,6 +11,11 @@ compares true and estimated values. Then the odometry experiment runs on the
 same faulty robot with the configured and with the calibrated parameters,
 and without faults, over ``--seeds`` paths: the final position error of the
 slip-minimising odometry before and after calibration.
+
+The steps (a measured drive, a calibration per reference, an odometry path
+per seed; with ``--routes``, the trials) report their progress on stderr
+(holonomic_core.progress): a bar with the time left on a terminal, plain
+lines with the time left in a log. The tables stay on stdout, unchanged.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from holonomic_core.controller import BaseController
 from holonomic_core.loop import ManualClock
 from holonomic_core.model import load_model
 from holonomic_core.nominal import driver_for
+from holonomic_core.progress import Progress, progress
 from holonomic_core.schema import ConfigError
 from holonomic_core.se2 import relative_pose
 from holonomic_sim.odometry_experiment import final_errors, record_run, simulate
@@ -159,21 +165,25 @@ ODOMETRY_CONDITION = "drives, nominal (mu 1.0)"
 
 
 def odometry_errors(robot: str, sim_seed: int, overlay: dict, seeds: int,
-                    faults: dict, condition: str = ODOMETRY_CONDITION) -> dict[str, list[float]]:
+                    faults: dict, condition: str = ODOMETRY_CONDITION,
+                    bar: Progress | None = None) -> dict[str, list[float]]:
     """Final slip_min position errors [m] per path seed under the odometry
     experiment's ``condition``: without faults, with the faults and the
-    configured parameters, with the faults and the calibrated ones."""
+    configured parameters, with the faults and the calibrated ones.
+    ``bar``: advanced once per path, and each run's line written through it
+    (on stderr, above the bar on a terminal)."""
     out = {"no faults": [], "faults, configured": [], "faults, calibrated": []}
     fixed = {**faults, "sim.seed": sim_seed}
-    for seed in range(seeds):
+    bar = bar or Progress(seeds, "odometry paths")     # the lines alone, no display
+    for seed in bar.over(range(seeds)):
         for name, overrides, calibration in (("no faults", {}, None),
                                              ("faults, configured", fixed, None),
                                              ("faults, calibrated", fixed, overlay)):
             trial = final_errors(record_run(robot, condition, seed,
                                             overrides=overrides, calibration=calibration))
             out[name].append(trial.position_error["slip_min"])
-            print(f"  {name:20s} path {seed}: {trial.position_error['slip_min'] * 1e3:6.1f} mm "
-                  f"over {trial.distance:.1f} m", file=sys.stderr, flush=True)
+            bar.write(f"  {name:20s} path {seed}: {trial.position_error['slip_min'] * 1e3:6.1f} "
+                      f"mm over {trial.distance:.1f} m")
     return out
 
 
@@ -205,32 +215,34 @@ def print_measured(robot: str, sim_seed: int, faults: dict) -> bool:
     return True
 
 
-def routes_main(robots: list[str], seeds: int, only: list[str] | None) -> int:
-    """``--routes``: every route of every robot over fault seeds 1..``seeds``;
-    prints the table (stdout) and each trial as it ends (stderr). 1 when a
-    trial missed the route's criterion."""
+def _references(kind: str, ground_truth_only: bool) -> tuple[str, ...]:
+    """The references a family is calibrated against: a PCV also without one."""
+    return ("ground_truth", "none") if kind == "pcv" and not ground_truth_only \
+        else ("ground_truth",)
+
+
+def routes_main(kinds: list[tuple[str, str]], seeds: int, only: list[str] | None) -> int:
+    """``--routes``: every route of every robot ((robot, its family) pairs)
+    over fault seeds 1..``seeds``; prints the table (stdout) and each trial as
+    it ends (stderr), with the progress over the trials. 1 when a trial missed
+    the route's criterion."""
     from holonomic_sim.calibration_routes import ROUTES, TABLE_HEAD, route_trial
 
     rows, failed = [], False
-    for robot in robots:
-        try:
-            kind = load_model(robot).kind
-        except ConfigError as exc:
-            print(f"holonomic-calibration-experiment: {exc}", file=sys.stderr)
-            return 2
-        for route in ROUTES.get(kind, ()):
-            if only and route not in only:
+    trials = [(robot, route, seed) for robot, kind in kinds
+              for route in ROUTES.get(kind, ()) if not only or route in only
+              for seed in range(1, seeds + 1)]
+    with progress(len(trials), "holonomic-calibration-experiment", "trials") as bar:
+        for robot, route, seed in bar.over(trials):
+            try:
+                trial = route_trial(robot, route, seed)
+            except CalibrationError as exc:
+                rows.append(f"| {seed} | {robot} | {route} | refused: {exc} | | | **no** |")
+                failed = True
                 continue
-            for seed in range(1, seeds + 1):
-                try:
-                    trial = route_trial(robot, route, seed)
-                except CalibrationError as exc:
-                    rows.append(f"| {seed} | {robot} | {route} | refused: {exc} | | | **no** |")
-                    failed = True
-                    continue
-                rows.append(trial.row())
-                failed |= not trial.passed()
-                print(rows[-1] + f" path {trial.path_length:.1f} m", file=sys.stderr, flush=True)
+            rows.append(trial.row())
+            failed |= not trial.passed()
+            bar.write(rows[-1] + f" path {trial.path_length:.1f} m")
     print(TABLE_HEAD)
     print("\n".join(rows))
     return 1 if failed else 0
@@ -272,59 +284,69 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"--routes N must be 1..100, got {args.routes}")
     elif args.route:
         parser.error("--route needs --routes N")
+    robots = args.robot or (["xr4000", "hamr"] if args.routes is not None
+                            else ["xr4000", "comr3", "hamr"])
+    try:    # every robot's family before the first drive: the progress's total needs them
+        kinds = [(robot, load_model(robot).kind) for robot in robots]
+    except ConfigError as exc:
+        print(f"holonomic-calibration-experiment: {exc}", file=sys.stderr)
+        return 2
     if args.routes is not None:
-        return routes_main(args.robot or ["xr4000", "hamr"], args.routes, args.route)
+        return routes_main(kinds, args.routes, args.route)
+    # the steps: a measured drive (DDROT), a calibration per reference, an odometry path per seed
+    seeds = max(args.seeds, 0)
+    total = sum((kind == "ddrot") + (0 if args.measured_only else
+                                      len(_references(kind, args.ground_truth_only)) + seeds)
+                for _, kind in kinds)
     failed = False
-    for robot in args.robot or ["xr4000", "comr3", "hamr"]:
-        try:
-            kind = load_model(robot).kind
-        except ConfigError as exc:
-            print(f"holonomic-calibration-experiment: {exc}", file=sys.stderr)
-            return 2
-        if kind == "ddrot":
-            failed |= not print_measured(robot, args.sim_seed,
-                                         FAULTS[kind] if args.faults == "all" else
-                                         {"sim.wheel_radius_spread": 0.02})
-        if args.measured_only:
-            continue
-        faults = FAULTS[kind] if args.faults == "all" else {"sim.wheel_radius_spread": 0.02}
-        references = ("ground_truth", "none") if kind == "pcv" and not args.ground_truth_only \
-            else ("ground_truth",)
-        overlay = None
-        for reference in references:
-            try:
-                result, truth, errors = calibration_run(robot, args.sim_seed, args.duration,
-                                                        reference, faults, args.passes,
-                                                        args.control_mode)
-            except CalibrationError as exc:
-                print(f"{robot}: {exc}")
-                failed = True
+    with progress(total, "holonomic-calibration-experiment", "steps") as bar:
+        for robot, kind in kinds:
+            if kind == "ddrot":
+                failed |= not print_measured(robot, args.sim_seed,
+                                             FAULTS[kind] if args.faults == "all" else
+                                             {"sim.wheel_radius_spread": 0.02})
+                bar.advance()
+            if args.measured_only:
                 continue
-            fam = result.family
-            print(f"\n{robot} ({kind}), {args.passes} x {args.duration:g} s drive, faults {faults}, "
-                  f"reference {reference}: {result.samples} samples, rms residual "
-                  f"{result.rms_residual * 1e6:.1f} um")
-            print(result.table(truth))
-            for note in result.notes:
-                print(f"  note: {note}")
-            for k in dict.fromkeys(fam.kinds):
-                sel = [i for i, kk in enumerate(fam.kinds) if kk == k]
-                worst = float(np.max(np.abs(errors[sel])))
-                target = TARGETS.get((kind, k))
-                shown = (f"{math.degrees(worst):.3f} deg" if k == "zero"
-                         else f"{100 * worst:.3f} %")
-                goal = "" if target is None else (
-                    f" (target {math.degrees(target):.1f} deg)" if k == "zero"
-                    else f" (target {100 * target:.1f} %)")
-                print(f"  worst {k} error: {shown}{goal}")
-            if reference == "ground_truth":
-                overlay = result.overlay()
-        if overlay is not None and args.seeds > 0:
-            errs = odometry_errors(robot, args.sim_seed, overlay, args.seeds, faults)
-            print(f"{robot}: final slip_min odometry error, mean of {args.seeds} random "
-                  "60 s runs (odometry experiment):")
-            for name, values in errs.items():
-                print(f"  {name:20s} {np.mean(values) * 1e3:6.1f} mm")
+            faults = FAULTS[kind] if args.faults == "all" else {"sim.wheel_radius_spread": 0.02}
+            references = _references(kind, args.ground_truth_only)
+            overlay = None
+            for reference in bar.over(references):
+                try:
+                    result, truth, errors = calibration_run(robot, args.sim_seed, args.duration,
+                                                            reference, faults, args.passes,
+                                                            args.control_mode)
+                except CalibrationError as exc:
+                    print(f"{robot}: {exc}")
+                    failed = True
+                    continue
+                fam = result.family
+                print(f"\n{robot} ({kind}), {args.passes} x {args.duration:g} s drive, "
+                      f"faults {faults}, reference {reference}: {result.samples} samples, "
+                      f"rms residual {result.rms_residual * 1e6:.1f} um")
+                print(result.table(truth))
+                for note in result.notes:
+                    print(f"  note: {note}")
+                for k in dict.fromkeys(fam.kinds):
+                    sel = [i for i, kk in enumerate(fam.kinds) if kk == k]
+                    worst = float(np.max(np.abs(errors[sel])))
+                    target = TARGETS.get((kind, k))
+                    shown = (f"{math.degrees(worst):.3f} deg" if k == "zero"
+                             else f"{100 * worst:.3f} %")
+                    goal = "" if target is None else (
+                        f" (target {math.degrees(target):.1f} deg)" if k == "zero"
+                        else f" (target {100 * target:.1f} %)")
+                    print(f"  worst {k} error: {shown}{goal}")
+                if reference == "ground_truth":
+                    overlay = result.overlay()
+            if overlay is not None and args.seeds > 0:
+                errs = odometry_errors(robot, args.sim_seed, overlay, args.seeds, faults, bar=bar)
+                print(f"{robot}: final slip_min odometry error, mean of {args.seeds} random "
+                      "60 s runs (odometry experiment):")
+                for name, values in errs.items():
+                    print(f"  {name:20s} {np.mean(values) * 1e3:6.1f} mm")
+            else:
+                bar.skip(seeds)                 # no calibration to run them with
     return 1 if failed else 0
 
 

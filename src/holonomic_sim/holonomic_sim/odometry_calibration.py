@@ -85,10 +85,12 @@ def replay(rec, noise: OdometryNoise) -> dict:
 
 
 class Samples:
-    """Errors and covariance bases of one or more recordings, pooled."""
+    """Errors and covariance bases of one or more recordings, pooled.
+    ``bar`` (holonomic_core.progress): advanced once per recording replayed
+    (the replays are most of the time a calibration of many recordings takes)."""
 
-    def __init__(self, recordings=()):
-        parts = [self._one(rec) for rec in recordings]
+    def __init__(self, recordings=(), bar=None):
+        parts = [self._one(rec) for rec in (recordings if bar is None else bar.over(recordings))]
         self._pool(parts)
 
     @staticmethod
@@ -739,7 +741,7 @@ def _write_profile(path: str, noise: OdometryNoise, twist_window: float, robot: 
 def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = None,
                    per_floor: bool = False, profile_dir: str | None = None,
                    floor_names: dict | None = None, command: str = "",
-                   default_floors=None, fit_motions=None) -> OdometryNoise:
+                   default_floors=None, fit_motions=None, bar=None) -> OdometryNoise:
     """Print the coverage of the config's noise and, with ``fit_noise``:
 
     * one profile for all the recorded floors (:func:`fit`; only those in
@@ -757,8 +759,9 @@ def calibrate_main(recordings, fit_noise: bool = True, plot_path: str | None = N
 
     ``plot_path``: error against sigma; with per-floor profiles each floor's
     samples against its own profile's sigma. Returns the all-floors noise.
+    ``bar`` (holonomic_core.progress): advanced once per recording replayed.
     """
-    everything = Samples(recordings)
+    everything = Samples(recordings, bar)
     motions = list(dict.fromkeys(everything.motion.tolist()))
     fit_motions = [m for m in (fit_motions or ["random"]) if m in motions] or motions
     held_kinds = [m for m in motions if m not in fit_motions]

@@ -32,6 +32,11 @@ of the config's own covariance. :func:`simulate` is also the offline driver
 of the self-calibration experiment (a calibration overlay for the
 controller only, the simulated robot built from the drawing and its hidden
 errors, as holonomic-bringup builds it: :mod:`holonomic_core.nominal`).
+
+The runs, and with ``--calibrate`` or ``--check`` the replays of the
+odometry over them, report their progress on stderr
+(:mod:`holonomic_core.progress`): a bar with the time left on a terminal,
+plain lines with the time left in a log. The tables stay on stdout.
 """
 
 from __future__ import annotations
@@ -53,6 +58,7 @@ from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.loop import ManualClock
 from holonomic_core.nominal import driver_for
 from holonomic_core.odometry import Odometry
+from holonomic_core.progress import progress
 from holonomic_core.se2 import wrap_angle
 from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
                                          robot_config)
@@ -521,55 +527,56 @@ def main(argv: list[str] | None = None) -> int:
             for motion in dict.fromkeys(fit_motions + args.validate_motion)
             if motion in fit_motions or args.validate_floor is None
             or condition in args.validate_floor]
-    for condition, motion in runs:
-        duration = (args.duration if motion in fit_motions or not args.validate_duration
-                    else args.validate_duration)
-        for seed in range(args.first_seed, args.first_seed + args.seeds):
-            try:
-                drives = not CONDITIONS[condition]["sim.ideal_motors"]
-                extra = drive_overrides if drives else None
-                cached = args.recordings and recording_path(
-                    args.recordings, args.robot, condition, seed, duration, args.speed,
-                    args.acceleration, extra, motion)
-                rec = None
-                overrides = run_overrides(seed, args.speed, args.acceleration,
-                                          {**CONDITIONS[condition], **(extra or {})})
-                if cached and os.path.exists(cached):
-                    config = load_config(args.robot, overrides)
-                    try:
-                        rec = load_recording(cached, args.robot, condition, seed, config,
-                                             motion)
-                    except (OSError, ValueError, KeyError) as exc:
-                        print(f"{cached}: unreadable ({exc}), simulating the run again",
-                              file=sys.stderr)
-                if rec is None:
-                    rec = record_run(args.robot, condition, seed, duration,
-                                     speed=args.speed, acceleration=args.acceleration,
-                                     overrides=extra, motion=motion)
-                    if cached:
-                        save_recording(rec, cached)
-            except ConfigError as exc:      # e.g. per-wheel radii on a DDROT
-                print(f"{condition}: skipped for {args.robot} ({exc})", file=sys.stderr)
-                break
-            note = ""
-            if args.self_calibrate:
+    with progress(len(runs) * args.seeds, "holonomic-odometry-experiment", "runs") as bar:
+        for condition, motion in runs:
+            duration = (args.duration if motion in fit_motions or not args.validate_duration
+                        else args.validate_duration)
+            for seed in bar.over(range(args.first_seed, args.first_seed + args.seeds)):
                 try:
-                    rec, radius_error = self_calibrated(rec, overrides)
-                except CalibrationError as exc:
-                    print(f"{condition} seed {seed}: left out, the self-calibration failed "
-                          f"({exc})", file=sys.stderr)
-                    continue
-                note = f"  radii calibrated to {radius_error:.2f} %"
-            trial = final_errors(rec)
-            trials.append(trial)
-            if args.calibrate or args.check:
-                recordings.append(rec)
-            errs = "  ".join(f"{e} {trial.position_error[e] * 1000:6.1f}mm" for e in ESTIMATORS)
-            label = condition if motion == "random" else f"{condition} / {motion}"
-            print(f"{label:41s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
-                  f"({trial.seconds:.1f} s){note}"
-                  f"{'  FAULT: ' + trial.fault if trial.fault else ''}",
-                  file=sys.stderr, flush=True)
+                    drives = not CONDITIONS[condition]["sim.ideal_motors"]
+                    extra = drive_overrides if drives else None
+                    cached = args.recordings and recording_path(
+                        args.recordings, args.robot, condition, seed, duration, args.speed,
+                        args.acceleration, extra, motion)
+                    rec = None
+                    overrides = run_overrides(seed, args.speed, args.acceleration,
+                                              {**CONDITIONS[condition], **(extra or {})})
+                    if cached and os.path.exists(cached):
+                        config = load_config(args.robot, overrides)
+                        try:
+                            rec = load_recording(cached, args.robot, condition, seed, config,
+                                                 motion)
+                        except (OSError, ValueError, KeyError) as exc:
+                            bar.write(f"{cached}: unreadable ({exc}), simulating the run "
+                                      "again")
+                    if rec is None:
+                        rec = record_run(args.robot, condition, seed, duration,
+                                         speed=args.speed, acceleration=args.acceleration,
+                                         overrides=extra, motion=motion)
+                        if cached:
+                            save_recording(rec, cached)
+                except ConfigError as exc:      # e.g. per-wheel radii on a DDROT
+                    bar.write(f"{condition}: skipped for {args.robot} ({exc})")
+                    bar.skip(args.first_seed + args.seeds - seed)
+                    break
+                note = ""
+                if args.self_calibrate:
+                    try:
+                        rec, radius_error = self_calibrated(rec, overrides)
+                    except CalibrationError as exc:
+                        bar.write(f"{condition} seed {seed}: left out, the self-calibration "
+                                  f"failed ({exc})")
+                        continue
+                    note = f"  radii calibrated to {radius_error:.2f} %"
+                trial = final_errors(rec)
+                trials.append(trial)
+                if args.calibrate or args.check:
+                    recordings.append(rec)
+                errs = "  ".join(f"{e} {trial.position_error[e] * 1000:6.1f}mm" for e in ESTIMATORS)
+                label = condition if motion == "random" else f"{condition} / {motion}"
+                bar.write(f"{label:41s} seed {seed:3d}: {trial.distance:5.1f} m  {errs}  "
+                          f"({trial.seconds:.1f} s){note}"
+                          f"{'  FAULT: ' + trial.fault if trial.fault else ''}")
     if not trials and args.self_calibrate:
         print("holonomic-odometry-experiment: no run could be self-calibrated (the reasons "
               "above)", file=sys.stderr)
@@ -580,11 +587,15 @@ def main(argv: list[str] | None = None) -> int:
             json.dump([t.__dict__ for t in trials], handle, indent=1)
     if recordings:
         from holonomic_sim.odometry_calibration import calibrate_main
-        calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot,
-                       per_floor=True, profile_dir=args.profiles, floor_names=PROFILE_NAMES,
-                       default_floors=args.default_floor, fit_motions=fit_motions,
-                       command=" ".join(["holonomic-odometry-experiment",
-                                         *(argv if argv is not None else sys.argv[1:])]))
+        # the replays of the odometry over every run: the long part of --calibrate
+        with progress(len(recordings), "holonomic-odometry-experiment replay",
+                      "recordings") as bar:
+            calibrate_main(recordings, fit_noise=args.calibrate, plot_path=args.plot,
+                           per_floor=True, profile_dir=args.profiles,
+                           floor_names=PROFILE_NAMES, default_floors=args.default_floor,
+                           fit_motions=fit_motions, bar=bar,
+                           command=" ".join(["holonomic-odometry-experiment",
+                                             *(argv if argv is not None else sys.argv[1:])]))
     return 0
 
 
