@@ -3,12 +3,15 @@
 # PYTHON=python3.12 chooses the interpreter of a new .venv; VENV=... WS=...
 # put the virtual environment and the colcon workspace elsewhere (e.g. a
 # second Python next to the first, as .ci/run does); TESTS=... runs a subset
-# (default: every package's test/ folder, src/*/test).
+# (default: every package's test/ folder, src/*/test). PYTEST_WORKERS=N runs
+# the tests in N processes (pytest-xdist, a test file per process at a time,
+# each with its own ROS_DOMAIN_ID); 0 runs them in this one.
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 VENV ?= .venv
 WS ?= ros2_ws
 TESTS ?= $(wildcard src/*/test)
+PYTEST_WORKERS ?= 2
 ENV := . $(WS)/env.sh &&
 
 .PHONY: help setup demo test bench mutation clean
@@ -28,7 +31,7 @@ demo: setup
 	@$(ENV) holonomic-demo --robot $(if $(ROBOT),$(ROBOT),hamr) --out out
 
 test: setup
-	@$(ENV) python -m pytest $(TESTS) -q $(PYTEST_ARGS)
+	@$(ENV) python -m pytest $(TESTS) -q -n $(PYTEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 bench: setup
 	@$(ENV) python bench/run.py $(BENCH_ARGS)

@@ -18,8 +18,8 @@ HEADER = """\
 # ros-jazzy-rmw-fastrtps-cpp, ros-jazzy-rosgraph-msgs, ros-jazzy-std-srvs, the
 # rosidl generators and ament_cmake (to build tf2_msgs), numpy, pybullet, tqdm,
 # pyyaml, matplotlib, python-can, canopen, mcap, mcap-ros2-support, foxglove-sdk,
-# colcon-common-extensions, pytest, hypothesis, mutmut (make mutation), and for
-# the tests only cantools, odrive-can (which ships ODrive's CANSimple DBC files)
+# colcon-common-extensions, pytest (with pytest-xdist: make test runs two
+# workers), hypothesis, mutmut (make mutation), and for the tests only cantools, odrive-can (which ships ODrive's CANSimple DBC files)
 # and websockets (an independent Foxglove client)."""
 
 pins = {}

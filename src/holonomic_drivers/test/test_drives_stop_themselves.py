@@ -98,12 +98,14 @@ def test_a_drive_whose_0x6007_defaults_to_0_stops_when_the_controller_dies(
     """abort_connection_zero.eds: 0x6007 = 0 (no action), writable. The driver
     writes 0x6007 = 1 (fault) or 3 (quick stop); when the controller stops
     (no more reads: no master heartbeat), each drive's heartbeat consumer
-    expires after drive_watchdog (0.25 s) and the drive does what 0x6007
+    expires after drive_watchdog (1 s here: this test's own thread cycles the
+    driver, and a stall of it longer than the default 0.25 s on a loaded
+    machine would expire the watchdog early) and the drive does what 0x6007
     says: FAULT, or QUICK STOP ACTIVE and, at rest, SWITCH ON DISABLED (their
     quick stop option code 0x605A is 2) -- the motors stop either way, and
     not in OPERATION ENABLED; and the controller, back, can arm them again."""
     # (fault is the default: no override, as a user's config would have it)
-    rig = rig_factory("abort_connection_zero.eds", **(
+    rig = rig_factory("abort_connection_zero.eds", **{"cia402.drive_watchdog": 1.0}, **(
         {} if reaction == "fault" else {"cia402.drive_watchdog_reaction": reaction}))
     rig.driver.configure()
     last = final_values(sdo_writes(rig.sniff(), 1))
