@@ -309,41 +309,56 @@ def test_publish_link_tf_puts_every_link_on_ros_tf(ros, hamr):
         ros.destroy_subscription(sub)
 
 
-def test_the_casters_steer_and_roll_as_their_joints(ros, start_bringup):
+#: per robot: its namespace here, its steered wheel units (name, wheel
+#: radius), the link each unit steers (the XR4000's caster fork, the swerve
+#: module's yoke: pcv_base / swerve_base description.py) and how closely each
+#: wheel's roll matches the base's dy / r (relative). Measured: XR4000 within
+#: 4e-5; swerve4 within 1.9e-4, its front wheels short and its rear ones long
+#: by as much (the simulated base turns a fraction of a mrad meanwhile)
+STEERED_UNITS = {
+    "xr4000": ("fox_pcv", lambda kin: kin.casters, "fork", 1e-4),
+    "swerve4": ("fox_swerve", lambda kin: kin.modules, "yoke", 5e-4),
+}
+
+
+@pytest.mark.parametrize("robot", sorted(STEERED_UNITS))
+def test_the_casters_steer_and_roll_as_their_joints(ros, start_bringup, robot):
+    ns, units_of, steered, roll_tolerance = STEERED_UNITS[robot]
     port = free_port()
-    proc = start_bringup("xr4000", "--enable", "--namespace", "fox_pcv",
+    proc = start_bringup(robot, "--enable", "--namespace", ns,
                          "--foxglove", str(port), "-p", "cmd_timeout:=2.0")
-    probe = Probe(ros, "fox_pcv")
+    probe = Probe(ros, ns)
     client = None
     try:
         probe.wait_ready()
-        client = connect(port, proc, "/fox_pcv/slip_residual")
-        client.subscribe("/tf", "/fox_pcv/slip_residual")
-        kin = load_model("xr4000").kinematics
-        probe.drive((0.0, 0.3, 0.0), 2.5)          # the casters turn, then roll along +y
+        client = connect(port, proc, f"/{ns}/slip_residual")
+        client.subscribe("/tf", f"/{ns}/slip_residual")
+        units = units_of(load_model(robot).kinematics)
+        # the casters (the swerve's modules) turn 90 deg, then roll along +y
+        probe.drive((0.0, 0.3, 0.0), 2.5)
         t0 = time.monotonic()
         probe.drive((0.0, 0.3, 0.0), 1.5)
-        messages = tf_since(client, t0)      # one window for the base and every caster
-        base = series(messages, "fox_pcv/base_link")
+        messages = tf_since(client, t0)      # one window for the base and every unit
+        base = series(messages, f"{ns}/base_link")
         dy = base[-1][1][1] - base[0][1][1]
         assert dy > 0.2, dy          # 0.45 m at full speed: it moved
-        for caster in kin.casters:
-            fork = series(messages, f"fox_pcv/{caster.name}_fork")
-            assert fork[-1][0] == "fox_pcv/base_link"
+        for unit in units:
+            fork = series(messages, f"{ns}/{unit.name}_{steered}")
+            assert fork[-1][0] == f"{ns}/base_link"
             yaw = yaw_of(fork[-1][2])
-            assert abs(math.cos(yaw)) < 1e-3, (caster.name, math.degrees(yaw))  # meas. 2e-5
-            wheel = series(messages, f"fox_pcv/{caster.name}_wheel")
+            assert abs(math.cos(yaw)) < 1e-3, (unit.name, math.degrees(yaw))  # meas. 3e-16
+            wheel = series(messages, f"{ns}/{unit.name}_wheel")
             spin = unwrapped([pitch_angle(q) for _, _, q in wheel])
             # a wheel heading +-y rolls +-dy / r (sign: its heading)
             rolled = (spin[-1] - spin[0]) * math.copysign(1.0, math.sin(yaw))
-            # measured: within 4e-6 of dy / r (steady rolling, no acceleration)
-            assert rolled == pytest.approx(dy / caster.wheel_radius, rel=1e-4), caster.name
-        residual = client.json("/fox_pcv/slip_residual")
-        assert set(residual) == {c.name for c in kin.casters}
+            # steady rolling, no acceleration (tolerance: STEERED_UNITS)
+            assert rolled == pytest.approx(dy / unit.wheel_radius, rel=roll_tolerance), unit.name
+        residual = client.json(f"/{ns}/slip_residual")
+        assert set(residual) == {u.name for u in units}
         # the layout's slip plot has a series for each of them
         slip = {path for panel, path in _plot_paths(json.loads(LAYOUT.read_text()))
                 if panel == "Plot!slip"}
-        assert {f"/slip_residual.{c.name}" for c in kin.casters} <= slip
+        assert {f"/slip_residual.{u.name}" for u in units} <= slip
     finally:
         if client is not None:
             client.close()

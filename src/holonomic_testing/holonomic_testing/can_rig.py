@@ -46,6 +46,36 @@ def unique_channel(tag: str) -> str:
     return f"{tag}-{os.getpid()}-{next(_channels)}"
 
 
+def with_loop_scheduling(action, realtime: bool = True):
+    """``action()`` in a short-lived thread given the loop process's
+    scheduling (loop_host.run_host: tight timer slack, SCHED_FIFO at the
+    default priority if ``realtime``); the threads it starts inherit it, the
+    test's own threads keep theirs. Not mlockall: it would lock the whole
+    pytest session's memory for every later test (and a page fault is not
+    what starves a loaded machine's test, the CPU is). Returns ``(what
+    action returned, why SCHED_FIFO was refused or None)``; raises what
+    ``action`` raised."""
+    outcome: list = []
+    refused: list = [None]
+
+    def body() -> None:
+        tighten_timer_slack()
+        if realtime:
+            refused[0] = set_fifo(DEFAULT_PRIORITY)
+        try:
+            outcome.append((True, action()))
+        except BaseException as exc:        # raised in the caller's thread
+            outcome.append((False, exc))
+
+    thread = threading.Thread(target=body, name="can_rig_scheduled")
+    thread.start()
+    thread.join()
+    ok, value = outcome[0]
+    if not ok:
+        raise value
+    return value, refused[0]
+
+
 class CanRig:
     def __init__(self, backend: str, robot: str = "hamr", realtime: bool = True,
                  drive_eds: str | None = None, **overrides):
@@ -174,32 +204,13 @@ class CanRig:
             raise errors[0]
 
     def _with_loop_scheduling(self, action):
-        """``action()`` in a short-lived thread given the loop process's
-        scheduling (loop_host.run_host: tight timer slack, SCHED_FIFO at the
-        default priority); the threads it starts inherit it, the test's own
-        threads keep theirs. Not mlockall: it would lock the whole pytest
-        session's memory for every later test (and a page fault is not what
-        starves a loaded machine's test, the CPU is)."""
-        outcome: list = []
-
-        def body() -> None:
-            tighten_timer_slack()
-            if self.realtime:
-                refused = set_fifo(DEFAULT_PRIORITY)
-                if refused is not None and self.realtime_refused is None:
-                    self.realtime_refused = refused
-                    print(f"can_rig: {refused}; the loop runs without", file=sys.stderr)
-            try:
-                outcome.append((True, action()))
-            except BaseException as exc:        # raised in the caller's thread
-                outcome.append((False, exc))
-
-        thread = threading.Thread(target=body, name="can_rig_scheduled")
-        thread.start()
-        thread.join()
-        ok, value = outcome[0]
-        if not ok:
-            raise value
+        """``action()`` with the loop process's scheduling
+        (:func:`with_loop_scheduling`); the first refusal is kept in
+        ``realtime_refused`` and said on stderr."""
+        value, refused = with_loop_scheduling(action, self.realtime)
+        if refused is not None and self.realtime_refused is None:
+            self.realtime_refused = refused
+            print(f"can_rig: {refused}; the loop runs without", file=sys.stderr)
         return value
 
     def mean_odometry_twist(self, seconds: float) -> np.ndarray:
