@@ -3,14 +3,14 @@
 # PYTHON=python3.12 chooses the interpreter of a new .venv; VENV=... WS=...
 # put the virtual environment and the colcon workspace elsewhere (e.g. a
 # second Python next to the first, as .ci/run does); TESTS=... runs a subset
-# (default: every package's test/ folder, src/*/test). PYTEST_WORKERS=N runs
+# (default: the system tests, tests/, and every package's unit tests, src/*/test). PYTEST_WORKERS=N runs
 # the tests in N processes (pytest-xdist, a test file per process at a time,
 # each with its own ROS_DOMAIN_ID); 0 runs them in this one.
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 VENV ?= .venv
 WS ?= ros2_ws
-TESTS ?= $(wildcard src/*/test)
+TESTS ?= tests $(wildcard src/*/test)
 PYTEST_WORKERS ?= 2
 ENV := . $(WS)/env.sh &&
 

@@ -1,6 +1,6 @@
 """Write the parameter tables of src/holonomic_bringup/README.md from the
 schema the node declares (holonomic_core.schema.ParamSpec), so the docs
-cannot drift from the code. src/holonomic_bringup/test/test_ros_user.py fails when the README is
+cannot drift from the code. tests/test_ros_user.py fails when the README is
 not what this script writes.
 
 Usage (after `make setup`, with ros2_ws/env.sh sourced):

@@ -20,7 +20,7 @@ from std_msgs.msg import String
 from holonomic_testing.ros_probe import (Bringup, Probe, Teleop, claim_domain_id, relative_pose,
                                          spin_in_thread, wait_until)
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def read_recording(path):

@@ -24,7 +24,7 @@ from holonomic_testing.foxglove_client import (FoxgloveClient, decode_frame_tran
 from holonomic_testing.ros_probe import Bringup, Probe, wait_until
 
 HAMR = load_model("hamr").kinematics
-LAYOUT = Path(__file__).resolve().parents[3] / "docs" / "foxglove" / "holonomic_base.json"
+LAYOUT = Path(__file__).resolve().parents[1] / "docs" / "foxglove" / "holonomic_base.json"
 #: ROS topics the MCAP recorder writes that the bridge does not serve live
 RECORDED_ONLY = {"/cmd_vel"}
 

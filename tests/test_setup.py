@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("fix_cmake_exports",
                                                ROOT / "scripts" / "fix_cmake_exports.py")
 fix_cmake_exports = importlib.util.module_from_spec(_spec)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from holonomic_core.progress import progress
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def load_script(name: str, path: Path):
