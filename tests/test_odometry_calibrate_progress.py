@@ -25,7 +25,7 @@ def test_odometry_calibrate_logs_reading_and_replaying_each_recording(capsys, mo
     assert all(re.search(r"\d+ s elapsed, about \d+ s left$", line) for line in lines[:3])
     assert lines[3].endswith(", done")
     # the results stay on stdout, as the calibration without progress prints them
-    from holonomic_sim.odometry_calibration import calibrate_main
+    from holonomic_core.odometry_calibration import calibrate_main
     calibrate_main(list(runs.values()), fit_noise=True, plot_path=None)
     assert "calibrated coverage" in captured.out
     assert capsys.readouterr().out == captured.out

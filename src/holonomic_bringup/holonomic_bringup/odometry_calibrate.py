@@ -7,7 +7,7 @@ robot a motion-capture or total-station topic recorded alongside, e.g.
 ``--reference-topic /mocap/odom``), replays the odometry over the joint
 readings, and fits the ``odometry.*`` covariance parameters exactly as
 ``holonomic-odometry-experiment --calibrate`` does (same code:
-``holonomic_sim.odometry_calibration``). Prints the coverage before and
+``holonomic_core.odometry_calibration``). Prints the coverage before and
 after and the block to paste into the config file. Drive the way the robot
 will be driven (speeds, turns, the floors it will see) for a few minutes,
 with ``publish_rate`` equal to ``control_rate``: the replay runs at the rate
@@ -39,8 +39,8 @@ from holonomic_core.se2 import relative_poses, wrap_angle
 
 
 def recording_from_mcap(path: Path, namespace: str = "", reference_topic: str = "ground_truth/odom"):
-    """A :class:`holonomic_sim.odometry_experiment.Recording` from one MCAP file."""
-    from holonomic_sim.odometry_experiment import Recording
+    """A :class:`holonomic_core.odometry_calibration.Recording` from one MCAP file."""
+    from holonomic_core.odometry_calibration import Recording
 
     if not path.is_file():
         raise ConfigError("FILE", str(path), "an existing MCAP file")
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="nav_msgs/Odometry topic of the true pose (default ground_truth/odom)")
     parser.add_argument("--plot", metavar="PNG", help="error against sigma, written to PNG")
     args = parser.parse_args(argv)
-    from holonomic_sim.odometry_calibration import calibrate_main
+    from holonomic_core.odometry_calibration import calibrate_main
 
     # the steps: reading each recording, then replaying the odometry over each
     with progress(2 * len(args.files), "holonomic-odometry-calibrate", "steps") as bar:

@@ -37,6 +37,7 @@ from holonomic_core.calibration import (calibrate, calibrate_measured, family_fo
                                         samples_from_readings)
 from holonomic_core.config import load_config
 from holonomic_core.se2 import relative_pose
+from holonomic_sim.calibration_drives import CALIBRATION_DRIVE, reference_drive
 from holonomic_sim.odometry_experiment import final_errors, simulate
 
 #: the worn robot: +-2 % tyres, +-2 % caster offsets
@@ -110,8 +111,6 @@ def calibrate_route(robot: str, route: str, sim_seed: int, duration: float = 40.
     """Drive the worn robot for ``route`` and calibrate it; the overlay
     (flat config keys) ``holonomic-calibrate`` would write. ``duration``
     [s]: the random calibration drive (not the tape-measure drive)."""
-    from holonomic_sim.calibration_experiment import CALIBRATION_DRIVE, reference_drive
-
     kind = load_config(robot).model.kind
     if route not in ROUTES[kind]:
         raise ValueError(f"route {route!r} is not one of {ROUTES[kind]} ({kind})")

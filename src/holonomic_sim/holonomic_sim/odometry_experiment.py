@@ -27,7 +27,7 @@ spread) for a sweep.
 Prints a table (mean and median per estimator and condition, and the ratios
 to ``pinv``) and, with ``--json``, writes every trial. With ``--calibrate``
 it also fits the odometry covariance to ground truth over the same runs
-(:mod:`holonomic_sim.odometry_calibration`); ``--check`` reports the coverage
+(:mod:`holonomic_core.odometry_calibration`); ``--check`` reports the coverage
 of the config's own covariance. :func:`simulate` is also the offline driver
 of the self-calibration experiment (a calibration overlay for the
 controller only, the simulated robot built from the drawing and its hidden
@@ -58,6 +58,7 @@ from holonomic_core.kinematics import ESTIMATORS
 from holonomic_core.loop import ManualClock
 from holonomic_core.nominal import driver_for
 from holonomic_core.odometry import Odometry
+from holonomic_core.odometry_calibration import Recording
 from holonomic_core.progress import progress
 from holonomic_core.se2 import wrap_angle
 from holonomic_core.command_line import (ArgumentParser, ShowDefaults, number, output_file,
@@ -123,36 +124,6 @@ class Trial:
     internal_force_rms: float = 0.0      # [N] RMS of |f_int| over the run
     fault: str | None = None             # the controller's fault, if it stopped the run
     motion: str = "random"               # the kind of motion (holonomic_sim.motion_kinds)
-
-
-@dataclass
-class Recording:
-    """One run: every joint reading and the true state at the same instants.
-
-    ``stamps`` (N,) [s]; ``positions`` (N, joints) [rad]; ``truth`` (N, 3)
-    true pose (x, y, yaw) in odom [m, m, rad]; ``truth_twist`` (N, 3) true
-    body twist in base_link [m/s, m/s, rad/s]; ``config`` the robot config
-    the controller ran (with a calibration overlay, if any); ``internal_force``
-    (N,) [N] the magnitude of the wheels' internal force
-    (:mod:`holonomic_sim.contact_forces`); ``fault`` the controller's fault if
-    it stopped the run; ``hidden_truth`` the simulator's hidden geometry
-    (``SimDriver.hidden_truth``); ``motion`` how the base was driven (a kind
-    of :mod:`holonomic_sim.motion_kinds`).
-    """
-
-    robot: str
-    condition: str
-    seed: int
-    config: object
-    stamps: np.ndarray
-    positions: np.ndarray
-    truth: np.ndarray
-    truth_twist: np.ndarray
-    seconds: float = 0.0
-    internal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    fault: str | None = None
-    hidden_truth: dict = field(default_factory=dict)
-    motion: str = "random"
 
 
 def _body_command(pose, target, speed: float, wz_max: float) -> tuple[float, float, float]:
@@ -586,7 +557,7 @@ def main(argv: list[str] | None = None) -> int:
         with open(args.json, "w") as handle:
             json.dump([t.__dict__ for t in trials], handle, indent=1)
     if recordings:
-        from holonomic_sim.odometry_calibration import calibrate_main
+        from holonomic_core.odometry_calibration import calibrate_main
         # the replays of the odometry over every run: the long part of --calibrate
         with progress(len(recordings), "holonomic-odometry-experiment replay",
                       "recordings") as bar:

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from holonomic_core.model import load_model
-from holonomic_sim.calibration_experiment import FAULTS, calibration_run
+from holonomic_sim.calibration_drives import FAULTS
+from holonomic_sim.calibration_experiment import calibration_run
 
 
 def _worst(result, errors, kind):
@@ -53,7 +54,7 @@ def test_ddrot_geometry_is_recovered_against_ground_truth():
 def hamr_reference_drive():
     # hidden: radii +-2 %, separation +-2 %, turret zero +-3 deg (sim.seed 2);
     # the simulator's default drive model; 5 m forward, 3 turns about the axle
-    from holonomic_sim.calibration_experiment import reference_drive
+    from holonomic_sim.calibration_drives import reference_drive
     return reference_drive("hamr", 2)
 
 
@@ -142,7 +143,7 @@ def xr4000_straight_run_drive():
     # the distance route's drive: the worn XR4000 (fault seed 1), 40 s of
     # random moves in torque mode, back to the start, a pause, 5 m straight
     # at constant heading, a pause
-    from holonomic_sim.calibration_experiment import CALIBRATION_DRIVE
+    from holonomic_sim.calibration_drives import CALIBRATION_DRIVE
     from holonomic_sim.calibration_routes import STRAIGHT_RUN, own_limits, worn_overrides
     from holonomic_sim.odometry_experiment import simulate
     return simulate("xr4000", 1, 40.0, **own_limits("xr4000"), straight=STRAIGHT_RUN,

@@ -5,8 +5,8 @@ fit on synthetic samples whose right answer is known."""
 import numpy as np
 import pytest
 
-from holonomic_sim.odometry_calibration import _band_loss, random_walk_spread
-from holonomic_sim.odometry_experiment import (CONDITION_KEYS, Recording, load_recording,
+from holonomic_core.odometry_calibration import Recording, _band_loss, random_walk_spread
+from holonomic_sim.odometry_experiment import (CONDITION_KEYS, load_recording,
                                                recording_path, save_recording)
 
 
@@ -63,7 +63,7 @@ def test_a_basis_at_rounding_level_gets_no_coefficient():
     # a DDROT's slip residual is ~1e-12 m/s: its basis (rho^2 dt summed) is
     # ~1e-24; "the coefficient that alone explains the error" would be
     # ~1e+20 and, multiplied by a basis that is rounding, meaningless
-    from holonomic_sim.odometry_calibration import _natural, _present
+    from holonomic_core.odometry_calibration import _natural, _present
     bases = np.array([[1.0, 1e-24], [2.0, 3e-24]])
     err2 = np.array([0.5, 1.0])
     assert _present(bases).tolist() == [1.0, 0.0]
@@ -76,7 +76,7 @@ def _one_floor(k_per_run, samples_per_run=10):
     and its position error (k_r sqrt(t), 0), against the bases t (heading,
     angular_variance_per_radian) and t I (position, linear_variance_per_meter),
     t = 1..samples_per_run; every other basis 0 (absent)."""
-    from holonomic_sim.odometry_calibration import HEADING_KEYS, POSITION_KEYS, Samples
+    from holonomic_core.odometry_calibration import HEADING_KEYS, POSITION_KEYS, Samples
     t = np.arange(1.0, samples_per_run + 1.0)
     parts = []
     for r, k in enumerate(k_per_run):
@@ -102,8 +102,8 @@ def test_a_floor_profile_is_scaled_for_the_next_run_not_the_runs_it_saw(monkeypa
     # 7/4 over all runs; the position's c t I to (k sqrt(t), 0): mean(k^2) / 2.
     # Every sample of a run has the same |e| / sigma, so 95 % of 4 equal runs
     # needs all 4 inside: heading k^2 <= 1.96^2 c, position k^2 <= 5.991 c.
-    from holonomic_sim import odometry_calibration
-    from holonomic_sim.odometry_calibration import fit
+    from holonomic_core import odometry_calibration
+    from holonomic_core.odometry_calibration import fit
     from holonomic_core.odometry import OdometryNoise
     # the scale alone: no random-walk floor under the fitted terms (the
     # floor has its own test below)
@@ -137,7 +137,7 @@ def _two_floors(with_rho4_basis):
     gains, rho^4 t for the slip4 gains (zero without them: the model before
     the rho^4 terms)."""
     from statistics import NormalDist
-    from holonomic_sim.odometry_calibration import HEADING_KEYS, POSITION_KEYS, Samples
+    from holonomic_core.odometry_calibration import HEADING_KEYS, POSITION_KEYS, Samples
     n, g = 400, 50.0
     t = np.arange(1.0, n + 1.0)
     u = (np.arange(n) + 0.5) / n
@@ -171,7 +171,7 @@ def test_the_rho4_terms_let_one_profile_cover_floors_whose_slip_differs():
     # whatever its gain; with the rho^4 basis the multi-floor search finds
     # the gain and both floors are in the band
     from holonomic_core.odometry import OdometryNoise
-    from holonomic_sim.odometry_calibration import BAND, fit
+    from holonomic_core.odometry_calibration import BAND, fit
     for with_rho4 in (True, False):
         samples = _two_floors(with_rho4)
         noise = fit(samples, OdometryNoise())
@@ -197,7 +197,7 @@ def test_the_random_walk_floors_never_go_to_zero_when_slip_explains_the_errors()
     # FLOOR_SHARE of the value at which the term alone explains the mean
     # squared error: mean(e^2) / mean(t), per column
     from holonomic_core.odometry import OdometryNoise
-    from holonomic_sim.odometry_calibration import FLOOR_SHARE, fit
+    from holonomic_core.odometry_calibration import FLOOR_SHARE, fit
     samples = _two_floors(True)
     t = np.tile(np.arange(1.0, 401.0), 2)
     samples.bases["angular_variance_per_radian"][:, 2, 2] = t

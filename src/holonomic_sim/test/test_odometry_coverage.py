@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from holonomic_core.config import load_config, read_params_file
-from holonomic_sim.odometry_calibration import Samples, mahalanobis2
+from holonomic_core.odometry_calibration import Samples, mahalanobis2
 from holonomic_sim.odometry_experiment import record_run
 
 PROFILES = Path(__file__).resolve().parents[3] / "config" / "odometry"

@@ -23,7 +23,7 @@ against errors up to 1.25 mm) and the HAMR 0.11-0.14 on sweeps (its sigma
 import numpy as np
 import pytest
 
-from holonomic_sim.odometry_calibration import Samples, mahalanobis2
+from holonomic_core.odometry_calibration import Samples, mahalanobis2
 from holonomic_sim.odometry_experiment import record_run
 
 NOMINAL = "drives, nominal (mu 1.0)"

@@ -1,6 +1,9 @@
 """Calibration of the odometry covariance against ground truth.
 
-``holonomic-odometry-experiment --calibrate`` records the experiment's runs
+The one fit that both tools run: the simulator's
+``holonomic-odometry-experiment --calibrate`` and, on a real floor,
+``holonomic-odometry-calibrate`` (a robot's recording with a reference of
+the true pose); ROS-free and simulator-free. It takes :class:`Recording`\ s
 (joint readings and the true pose and twist at the same instants), replays
 each recording through :class:`holonomic_core.odometry.Odometry`, and fits
 the coefficients of :class:`OdometryNoise` so that the published covariance
@@ -38,12 +41,45 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from holonomic_core.odometry import Odometry, OdometryNoise
 from holonomic_core.se2 import wrap_angle
+
+
+@dataclass
+class Recording:
+    """One run: every joint reading and the true state at the same instants.
+
+    What the fit reads, from the simulator (``holonomic-odometry-experiment``)
+    or from a robot's recording with a reference of the true pose
+    (``holonomic-odometry-calibrate``). ``robot``, ``condition`` and
+    ``seed`` name the run. ``stamps`` (N,) [s]; ``positions`` (N, joints) [rad]; ``truth`` (N, 3)
+    true pose (x, y, yaw) in odom [m, m, rad]; ``truth_twist`` (N, 3) true
+    body twist in base_link [m/s, m/s, rad/s]; ``config`` the robot config
+    the controller ran (with a calibration overlay, if any); ``internal_force``
+    (N,) [N] the magnitude of the wheels' internal force
+    (:mod:`holonomic_sim.contact_forces`); ``fault`` the controller's fault if
+    it stopped the run; ``hidden_truth`` the simulator's hidden geometry
+    (``SimDriver.hidden_truth``); ``motion`` how the base was driven (a kind
+    of :mod:`holonomic_sim.motion_kinds`).
+    """
+
+    robot: str
+    condition: str
+    seed: int
+    config: object
+    stamps: np.ndarray
+    positions: np.ndarray
+    truth: np.ndarray
+    truth_twist: np.ndarray
+    seconds: float = 0.0
+    internal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    fault: str | None = None
+    hidden_truth: dict = field(default_factory=dict)
+    motion: str = "random"
 
 #: pose coefficients (OdometryNoise fields), heading-only ones first
 HEADING_KEYS = ("angular_variance_per_radian", "angular_variance_per_meter",
