@@ -60,11 +60,11 @@ class Recording:
     true pose (x, y, yaw) in odom [m, m, rad]; ``truth_twist`` (N, 3) true
     body twist in base_link [m/s, m/s, rad/s]; ``config`` the robot config
     the controller ran (with a calibration overlay, if any); ``internal_force``
-    (N,) [N] the magnitude of the wheels' internal force
-    (:mod:`holonomic_sim.contact_forces`); ``fault`` the controller's fault if
-    it stopped the run; ``hidden_truth`` the simulator's hidden geometry
-    (``SimDriver.hidden_truth``); ``motion`` how the base was driven (a kind
-    of :mod:`holonomic_sim.motion_kinds`).
+    (N,) [N] the magnitude of the wheels' internal force (the simulator's;
+    empty from a recording); ``fault`` the controller's fault if it stopped
+    the run; ``hidden_truth`` the simulator's hidden geometry (empty from a
+    recording); ``motion`` how the base was driven (the experiment's kind of
+    motion: random, teleop, sweep, nav2, straight, spin, creep).
     """
 
     robot: str
