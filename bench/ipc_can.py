@@ -14,7 +14,6 @@ delay (receive time minus the frame's send stamp).
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import struct
 import tempfile
@@ -25,6 +24,7 @@ import can
 import numpy as np
 from can import BusABC, Message
 
+from holonomic_core.command_line import ArgumentParser, number
 from holonomic_testing.drive_host import DriveHost
 from holonomic_testing.ipc_can import IpcBus
 
@@ -71,9 +71,10 @@ def measure_latency(frames: int = 2000, period: float = 1e-3) -> dict[str, list[
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="bench/ipc_can.py", description=__doc__.split("\n")[0])
-    parser.add_argument("--frames", type=int, default=2000)
-    parser.add_argument("--period", type=float, default=1e-3, help="[s] between frames")
+    parser = ArgumentParser(prog="bench/ipc_can.py", description=__doc__.split("\n")[0])
+    parser.add_argument("--frames", type=number(10, 10**6, integer=True), default=2000)
+    parser.add_argument("--period", type=number(1e-4, 1.0, unit="s"), default=1e-3,
+                        help="[s] between frames")
     args = parser.parse_args(argv)
     for name, delays in measure_latency(args.frames, args.period).items():
         d = np.array(delays) * 1e3

@@ -33,6 +33,7 @@ from holonomic_core.model import load_model
 from holonomic_core.progress import Progress, progress
 from holonomic_core.schema import ConfigError
 from holonomic_sim.calibration_drives import CALIBRATION_DRIVE, FAULTS, reference_drive
+from holonomic_sim.calibration_routes import ROUTES, TABLE_HEAD, route_trial
 from holonomic_sim.odometry_experiment import final_errors, record_run, simulate
 
 #: the calibration's targets: relative error of lengths, absolute error of zeros [rad]
@@ -137,8 +138,6 @@ def routes_main(kinds: list[tuple[str, str]], seeds: int, only: list[str] | None
     over fault seeds 1..``seeds``; prints the table (stdout) and each trial as
     it ends (stderr), with the progress over the trials. 1 when a trial missed
     the route's criterion."""
-    from holonomic_sim.calibration_routes import ROUTES, TABLE_HEAD, route_trial
-
     rows, failed = [], False
     trials = [(robot, route, seed) for robot, kind in kinds
               for route in ROUTES.get(kind, ()) if not only or route in only
