@@ -3,8 +3,9 @@
 The one fit that both tools run: the simulator's
 ``holonomic-odometry-experiment --calibrate`` and, on a real floor,
 ``holonomic-odometry-calibrate`` (a robot's recording with a reference of
-the true pose); ROS-free and simulator-free. It takes :class:`Recording`\ s
-(joint readings and the true pose and twist at the same instants), replays
+the true pose); ROS-free and simulator-free. It takes recordings
+(:class:`Recording`: joint readings and the true pose and twist at the same
+instants), replays
 each recording through :class:`holonomic_core.odometry.Odometry`, and fits
 the coefficients of :class:`OdometryNoise` so that the published covariance
 matches the errors it claims:
